@@ -1,0 +1,189 @@
+"""Attitude: quaternions, Wahba's problem (SVD and QUEST), RA/Dec/roll, residuals, covariance.
+
+A quaternion ``q = [w, x, y, z]`` (scalar first, Hamilton product) gives the matrix ``R(q)``
+that rotates ICRS vectors into the camera frame: ``v_cam = R v_icrs``. RA/Dec are those of the
+boresight (+z); roll is the position angle of image-up (-y) at the boresight, measured from
+celestial north through east, in degrees [0, 360).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import angle_between, radec_to_vector
+from .types import FloatArray
+
+ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
+
+
+def quat_to_matrix(q: FloatArray) -> FloatArray:
+    """Rotation matrix ``(3, 3)`` (or ``(..., 3, 3)``) of unit quaternion(s) ``[w, x, y, z]``."""
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    r = np.empty(q.shape[:-1] + (3, 3))
+    r[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    r[..., 0, 1] = 2 * (x * y - w * z)
+    r[..., 0, 2] = 2 * (x * z + w * y)
+    r[..., 1, 0] = 2 * (x * y + w * z)
+    r[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    r[..., 1, 2] = 2 * (y * z - w * x)
+    r[..., 2, 0] = 2 * (x * z - w * y)
+    r[..., 2, 1] = 2 * (y * z + w * x)
+    r[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return r
+
+
+def matrix_to_quat(r: FloatArray) -> FloatArray:
+    """Unit quaternion ``[w, x, y, z]`` with ``w >= 0`` of a rotation matrix (Shepperd's method)."""
+    r = np.asarray(r, dtype=np.float64)
+    tr = np.trace(r)
+    cands = np.array([tr, r[0, 0], r[1, 1], r[2, 2]])
+    i = int(np.argmax(cands))
+    if i == 0:
+        s = math.sqrt(1.0 + tr) * 2
+        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+    elif i == 1:
+        s = math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
+        q = [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
+    elif i == 2:
+        s = math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
+        q = [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
+    else:
+        s = math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
+        q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
+    qa = np.asarray(q)
+    qa /= np.linalg.norm(qa)
+    return -qa if qa[0] < 0 else qa
+
+
+def quat_multiply(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Hamilton product ``a * b`` (``R(a b) = R(a) R(b)``)."""
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+    ])
+
+
+def quat_angle_deg(a: FloatArray, b: FloatArray) -> float:
+    """Rotation angle between two attitudes, degrees."""
+    d = abs(float(np.dot(np.asarray(a) / np.linalg.norm(a), np.asarray(b) / np.linalg.norm(b))))
+    return math.degrees(2 * math.acos(min(1.0, d)))
+
+
+def random_rotations(n: int, rng: np.random.Generator) -> FloatArray:
+    """``n`` quaternions uniform on SO(3) (Shoemake's method), ``w >= 0``."""
+    u1, u2, u3 = rng.random((3, n))
+    a, b = np.sqrt(1 - u1), np.sqrt(u1)
+    q = np.stack([a * np.sin(2 * np.pi * u2), a * np.cos(2 * np.pi * u2),
+                  b * np.sin(2 * np.pi * u3), b * np.cos(2 * np.pi * u3)], axis=1)
+    q = q[:, [3, 0, 1, 2]]  # any ordering of a uniform quaternion is uniform; make it [w, x, y, z]
+    q[q[:, 0] < 0] *= -1
+    return q
+
+
+def matrix_from_radec_roll(ra_deg: float, dec_deg: float, roll_deg: float) -> FloatArray:
+    """ICRS -> camera matrix for a boresight at (RA, Dec) and image-up at position angle roll."""
+    ra, dec, pa = (math.radians(v) for v in (ra_deg, dec_deg, roll_deg))
+    z = radec_to_vector(ra, dec)
+    north = np.array([-math.sin(dec) * math.cos(ra), -math.sin(dec) * math.sin(ra), math.cos(dec)])
+    east = np.array([-math.sin(ra), math.cos(ra), 0.0])
+    up = math.cos(pa) * north + math.sin(pa) * east
+    y = -up
+    x = np.cross(y, z)
+    return np.stack([x, y, z])
+
+
+def radec_roll(r: FloatArray) -> tuple[float, float, float]:
+    """Boresight RA, Dec and roll (degrees) of an ICRS -> camera matrix. RA in [0, 360)."""
+    z = r[2]
+    up = -r[1]
+    ra = math.atan2(z[1], z[0]) % (2 * math.pi)
+    dec = math.asin(max(-1.0, min(1.0, z[2])))
+    north = np.array([-math.sin(dec) * math.cos(ra), -math.sin(dec) * math.sin(ra), math.cos(dec)])
+    east = np.array([-math.sin(ra), math.cos(ra), 0.0])
+    roll = math.degrees(math.atan2(float(up @ east), float(up @ north))) % 360.0
+    return math.degrees(ra), math.degrees(dec), roll
+
+
+def wahba_svd(obs: FloatArray, ref: FloatArray, weights: FloatArray | None = None) -> FloatArray:
+    """Rotation ``R`` (3, 3) minimising ``sum w_i |obs_i - R ref_i|^2`` (Markley's SVD method).
+
+    Parameters
+    ----------
+    obs : (N, 3) float64
+        Unit vectors measured in the camera frame.
+    ref : (N, 3) float64
+        The same stars' unit vectors in ICRS.
+    weights : (N,) float64, optional
+        Non-negative weights (default all ones).
+    """
+    w = np.ones(len(obs)) if weights is None else np.asarray(weights, dtype=np.float64)
+    b = (obs * w[:, None]).T @ ref
+    u, _, vt = np.linalg.svd(b)
+    d = np.linalg.det(u) * np.linalg.det(vt)
+    return u @ np.diag([1.0, 1.0, d]) @ vt
+
+
+def quest(obs: FloatArray, ref: FloatArray, weights: FloatArray | None = None) -> FloatArray:
+    """Quaternion ``[w, x, y, z]`` solving Wahba's problem by Davenport's q-method (the exact
+    eigenvector QUEST approximates); same arguments as :func:`wahba_svd`."""
+    w = np.ones(len(obs)) if weights is None else np.asarray(weights, dtype=np.float64)
+    b = (obs * w[:, None]).T @ ref
+    s = b + b.T
+    sigma = np.trace(b)
+    zv = np.array([b[1, 2] - b[2, 1], b[2, 0] - b[0, 2], b[0, 1] - b[1, 0]])
+    k = np.empty((4, 4))
+    k[0, 0] = sigma
+    k[0, 1:] = zv
+    k[1:, 0] = zv
+    k[1:, 1:] = s - sigma * np.eye(3)
+    vals, vecs = np.linalg.eigh(k)
+    q = vecs[:, int(np.argmax(vals))]
+    # Davenport's q is the frame rotation [w, -axis]; express it as our vector rotation.
+    q = np.array([q[0], -q[1], -q[2], -q[3]])
+    return -q if q[0] < 0 else q
+
+
+def residuals_arcsec(obs: FloatArray, ref: FloatArray, r: FloatArray) -> FloatArray:
+    """Angle in arcsec between each observed vector and its reference rotated into the camera."""
+    return np.asarray(angle_between(obs, ref @ r.T)) * ARCSEC_PER_RAD
+
+
+@dataclass(frozen=True, slots=True)
+class AttitudeEstimate:
+    """A fitted attitude with its residuals and 1-sigma errors."""
+
+    matrix: FloatArray
+    quaternion: FloatArray
+    residuals_arcsec: FloatArray
+    rms_arcsec: float
+    sigma_arcsec: tuple[float, float, float]
+
+
+def estimate(obs: FloatArray, ref: FloatArray, *, sigma_rad: float | None = None) -> AttitudeEstimate:
+    """Attitude from matched pairs, with residuals and the covariance-derived 1-sigma errors
+    about the camera's x, y (cross-boresight) and z (roll) axes.
+
+    ``sigma_rad`` is the per-star measurement error; by default the fit's own RMS residual.
+    """
+    r = wahba_svd(obs, ref)
+    res = residuals_arcsec(obs, ref, r)
+    rms = float(np.sqrt(np.mean(res**2))) if len(res) else float("nan")
+    n = len(obs)
+    sig = sigma_rad if sigma_rad is not None else max(rms / ARCSEC_PER_RAD * math.sqrt(n / max(n - 3, 1)),
+                                                      1e-7)
+    info = np.eye(3) * n - obs.T @ obs  # sum (I - v v^T)
+    try:
+        cov = np.linalg.inv(info) * sig**2
+        sd = tuple(float(math.sqrt(max(c, 0.0)) * ARCSEC_PER_RAD) for c in np.diag(cov))
+    except np.linalg.LinAlgError:
+        sd = (float("inf"),) * 3
+    return AttitudeEstimate(r, matrix_to_quat(r), res, rms, sd)  # type: ignore[arg-type]

@@ -1,0 +1,220 @@
+"""Pinhole camera model, optional Brown-Conrady distortion, and multi-camera rigs.
+
+Frames: pixel x = column, y = row, the centre of the top-left pixel is (0, 0); the camera
+frame has +x right, +y down and +z along the boresight out into the sky (OpenCV's).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from .errors import InvalidInputError
+from .types import FloatArray
+
+
+@dataclass(frozen=True, slots=True)
+class Camera:
+    """An ideal pinhole camera plus optional lens distortion.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    f_px : float
+        Focal length in pixels.
+    cx, cy : float
+        Principal point, px (default ``((W-1)/2, (H-1)/2)``).
+    distortion : tuple of float, optional
+        Brown-Conrady coefficients in OpenCV order ``(k1, k2, p1, p2[, k3])``.
+    """
+
+    width: int
+    height: int
+    f_px: float
+    cx: float
+    cy: float
+    distortion: tuple[float, ...] | None = None
+
+    # ---- constructors -------------------------------------------------------------------
+    @classmethod
+    def from_fov(cls, fov_deg: float, width: int, height: int, **kw: Any) -> Camera:
+        """Camera whose horizontal field (left edge to right edge) is ``fov_deg`` degrees."""
+        f_px = (width / 2.0) / math.tan(math.radians(fov_deg) / 2.0)
+        return cls._make(width, height, f_px, **kw)
+
+    @classmethod
+    def from_focal(cls, focal_mm: float, pixel_um: float, width: int, height: int, **kw: Any) -> Camera:
+        """Camera from focal length (mm) and pixel pitch (micrometres)."""
+        return cls._make(width, height, focal_mm * 1000.0 / pixel_um, **kw)
+
+    @classmethod
+    def _make(
+        cls,
+        width: int,
+        height: int,
+        f_px: float,
+        cx: float | None = None,
+        cy: float | None = None,
+        distortion: Any = None,
+    ) -> Camera:
+        dist = None if distortion is None or not any(distortion) else tuple(float(d) for d in distortion)
+        cam = cls(
+            int(width),
+            int(height),
+            float(f_px),
+            (width - 1) / 2.0 if cx is None else float(cx),
+            (height - 1) / 2.0 if cy is None else float(cy),
+            dist,
+        )
+        cam.validate()
+        return cam
+
+    @classmethod
+    def from_spec(cls, spec: dict[str, Any], *, field: str = "camera") -> Camera:
+        """From a wire-format dict: ``width``, ``height`` and one of ``fov_deg``;
+        ``focal_mm`` + ``pixel_um``; ``f_px`` (with optional ``cx``, ``cy``, ``distortion``)."""
+        try:
+            w, h = int(spec["width"]), int(spec["height"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InvalidInputError(f"{field}.width", "width and height (px) are required") from exc
+        kw = {k: spec.get(k) for k in ("cx", "cy", "distortion")}
+        if spec.get("fov_deg") is not None:
+            return cls.from_fov(float(spec["fov_deg"]), w, h, **kw)
+        if spec.get("focal_mm") is not None and spec.get("pixel_um") is not None:
+            return cls.from_focal(float(spec["focal_mm"]), float(spec["pixel_um"]), w, h, **kw)
+        if spec.get("f_px") is not None:
+            return cls._make(w, h, float(spec["f_px"]), **kw)
+        raise InvalidInputError(field, "give fov_deg, focal_mm + pixel_um, or f_px")
+
+    def validate(self) -> None:
+        """Raise InvalidInputError unless sizes and focal length are sane."""
+        if not (0 < self.width <= 65536 and 0 < self.height <= 65536):
+            raise InvalidInputError("camera.width", "image size must be 1..65536 px")
+        if not (math.isfinite(self.f_px) and self.f_px > 0):
+            raise InvalidInputError("camera.f_px", "focal length must be positive")
+        if self.fov_deg >= 170:
+            raise InvalidInputError("camera.fov_deg", "field of view must be below 170 deg")
+        if not (math.isfinite(self.cx) and math.isfinite(self.cy)):
+            raise InvalidInputError("camera.cx", "principal point must be finite")
+
+    def to_spec(self) -> dict[str, Any]:
+        """Wire-format dict (``f_px`` form)."""
+        spec: dict[str, Any] = {"width": self.width, "height": self.height, "f_px": self.f_px,
+                                "cx": self.cx, "cy": self.cy}
+        if self.distortion:
+            spec["distortion"] = list(self.distortion)
+        return spec
+
+    # ---- properties ---------------------------------------------------------------------
+    @property
+    def fov_deg(self) -> float:
+        """Horizontal field of view, degrees."""
+        return math.degrees(2 * math.atan((self.width / 2.0) / self.f_px))
+
+    @property
+    def fov_y_deg(self) -> float:
+        """Vertical field of view, degrees."""
+        return math.degrees(2 * math.atan((self.height / 2.0) / self.f_px))
+
+    @property
+    def diagonal_fov_deg(self) -> float:
+        """Full diagonal field of view, degrees."""
+        return math.degrees(2 * math.atan(math.hypot(self.width, self.height) / 2.0 / self.f_px))
+
+    @property
+    def pixel_scale_rad(self) -> float:
+        """Angle subtended by one pixel at the principal point, radians."""
+        return 1.0 / self.f_px
+
+    @property
+    def matrix(self) -> FloatArray:
+        """The 3x3 intrinsic matrix K."""
+        return np.array([[self.f_px, 0, self.cx], [0, self.f_px, self.cy], [0, 0, 1.0]])
+
+    # ---- projections --------------------------------------------------------------------
+    def pixel_to_vector(self, xy: FloatArray) -> FloatArray:
+        """Unit vectors ``(N, 3)`` in the camera frame of pixel positions ``(N, 2)``.
+
+        Distortion, if any, is removed first (OpenCV ``undistortPoints``).
+        """
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if self.distortion:
+            norm = cv2.undistortPoints(
+                xy.reshape(-1, 1, 2), self.matrix, np.asarray(self.distortion, dtype=np.float64),
+                criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-10),
+            ).reshape(-1, 2)
+        else:
+            norm = np.empty_like(xy)
+            norm[:, 0] = (xy[:, 0] - self.cx) / self.f_px
+            norm[:, 1] = (xy[:, 1] - self.cy) / self.f_px
+        v = np.empty((len(xy), 3))
+        v[:, :2] = norm
+        v[:, 2] = 1.0
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        return v
+
+    def vector_to_pixel(self, v: FloatArray) -> tuple[FloatArray, np.ndarray]:
+        """Pixel positions ``(N, 2)`` of camera-frame vectors ``(N, 3)``, and a mask of those
+        in front of the camera (``z > 0``) and inside the image."""
+        v = np.asarray(v, dtype=np.float64).reshape(-1, 3)
+        z = v[:, 2]
+        front = z > 1e-9
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xn = np.where(front, v[:, 0] / np.where(front, z, 1.0), np.nan)
+            yn = np.where(front, v[:, 1] / np.where(front, z, 1.0), np.nan)
+        if self.distortion:
+            xn, yn = _distort(xn, yn, self.distortion)
+        xy = np.stack([self.f_px * xn + self.cx, self.f_px * yn + self.cy], axis=1)
+        inside = front & self.contains(xy)
+        return xy, inside
+
+    def contains(self, xy: FloatArray, margin_px: float = 0.0) -> np.ndarray:
+        """Mask of pixel positions inside the image (pixel edges at -0.5 and W-0.5)."""
+        x, y = xy[:, 0], xy[:, 1]
+        with np.errstate(invalid="ignore"):
+            return (
+                (x >= -0.5 + margin_px)
+                & (x <= self.width - 0.5 - margin_px)
+                & (y >= -0.5 + margin_px)
+                & (y <= self.height - 0.5 - margin_px)
+            )
+
+
+def _distort(xn: FloatArray, yn: FloatArray, coeffs: tuple[float, ...]) -> tuple[FloatArray, FloatArray]:
+    """Apply Brown-Conrady distortion (OpenCV order k1, k2, p1, p2, k3) to normalised coords."""
+    k = list(coeffs) + [0.0] * (5 - len(coeffs))
+    k1, k2, p1, p2, k3 = k[:5]
+    r2 = xn * xn + yn * yn
+    radial = 1 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
+    xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
+    yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
+    return xd, yd
+
+
+@dataclass(frozen=True, slots=True)
+class Rig:
+    """Several cameras fixed to one body.
+
+    ``mountings[i]`` is the unit quaternion ``[w, x, y, z]`` rotating body-frame vectors into
+    camera ``i``'s frame (``v_cam = R(q) v_body``). Camera 0 is usually the reference, with
+    identity mounting, so that the body frame is camera 0's frame.
+    """
+
+    cameras: tuple[Camera, ...]
+    mountings: tuple[tuple[float, float, float, float], ...]
+
+    def __post_init__(self) -> None:
+        if len(self.cameras) != len(self.mountings) or not self.cameras:
+            raise InvalidInputError("cameras", "a rig needs one mounting quaternion per camera")
+
+    def body_vectors(self, index: int, v_cam: FloatArray) -> FloatArray:
+        """Rotate camera ``index``'s vectors ``(N, 3)`` into the body frame."""
+        from .attitude import quat_to_matrix
+
+        r = quat_to_matrix(np.asarray(self.mountings[index]))
+        return np.asarray(v_cam) @ r  # R^T v for row vectors

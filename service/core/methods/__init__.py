@@ -1,0 +1,58 @@
+"""Identification methods behind one registry.
+
+Each method is one module owning its tables (built into the navigation database) and its
+matcher. Adding a method = adding a module and one line to ``_REGISTRY``.
+"""
+
+from __future__ import annotations
+
+from ..errors import UnknownMethodError
+from ..navdb.reader import NavDatabase
+from .base import Matcher, Method, SolveContext
+from .maxangle import MaxAngle
+from .pyramid import Pyramid
+
+_REGISTRY: dict[str, Method] = {m.name: m for m in (MaxAngle(), Pyramid())}
+
+AUTO_ORDER: tuple[str, ...] = ("maxangle", "pyramid")
+"""``auto`` tries these in order (fastest first, measured by bench/bench_methods.py), skipping
+methods whose tables the database lacks."""
+
+
+def method_names() -> list[str]:
+    """Registered method names (``auto`` excluded)."""
+    return sorted(_REGISTRY)
+
+
+def get_method(name: str) -> Method:
+    """The method called ``name``; raises ``UnknownMethodError``."""
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise UnknownMethodError(name, ["auto", *method_names()]) from None
+
+
+def get_matcher(db: NavDatabase, name: str) -> Matcher:
+    """A matcher for ``name`` over ``db``, created once per opened database."""
+    cache = db.__dict__.setdefault("_matchers", {})
+    if name not in cache:
+        get_method(name)
+        if name not in db.tables:
+            raise UnknownMethodError(name, ["auto", *db.methods])
+        cache[name] = _REGISTRY[name].matcher(db)
+    return cache[name]
+
+
+def resolve(db: NavDatabase, name: str) -> list[str]:
+    """Methods to try for ``name`` (``auto`` expands to those ``db`` has, fastest first)."""
+    if name == "auto":
+        order = [m for m in AUTO_ORDER if m in db.tables]
+        order += [m for m in method_names() if m in db.tables and m not in order]
+        return order
+    get_method(name)
+    if name not in db.tables:
+        raise UnknownMethodError(name, ["auto", *db.methods])
+    return [name]
+
+
+__all__ = ["AUTO_ORDER", "Matcher", "Method", "SolveContext", "get_matcher", "get_method", "method_names", "resolve"]

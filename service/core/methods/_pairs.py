@@ -1,0 +1,88 @@
+"""Star-pair tables sorted by angular separation (the k-vector family's core)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..geometry import chord_from_angle
+from ..types import FloatArray
+
+
+def build_pair_table(vec: FloatArray, max_angle_rad: float, min_angle_rad: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """All star pairs with ``min < angle <= max``, sorted by angle.
+
+    Returns ``pairs`` ``(M, 2)`` int32 (row indices, smaller first) and ``angles`` ``(M,)``
+    float64 radians.
+    """
+    tree = cKDTree(vec)
+    pairs = tree.query_pairs(float(chord_from_angle(max_angle_rad)), output_type="ndarray")
+    if len(pairs) == 0:
+        return np.zeros((0, 2), np.int32), np.zeros(0)
+    chord = np.linalg.norm(vec[pairs[:, 0]] - vec[pairs[:, 1]], axis=1)
+    ang = 2 * np.arcsin(np.clip(chord / 2, 0, 1))
+    keep = ang > min_angle_rad
+    pairs, ang = pairs[keep], ang[keep]
+    order = np.argsort(ang, kind="stable")
+    return np.sort(pairs[order], axis=1).astype(np.int32), ang[order]
+
+
+
+def directed_edges(pairs: np.ndarray, angles: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """Catalogue pairs with angle in ``[lo, hi]``, in both orientations: ``(2K, 2)`` int64
+    sorted by first column."""
+    i, j = np.searchsorted(angles, [lo, hi], side="left")
+    j = np.searchsorted(angles, hi, side="right")
+    p = pairs[i:j].astype(np.int64)
+    both = np.concatenate([p, p[:, ::-1]])
+    return both[np.argsort(both[:, 0], kind="stable")]
+
+
+def pattern_order(n: int) -> list[tuple[int, int, int]]:
+    """Triangles of ``n`` stars in Mortari's pyramid order, which changes every star quickly
+    so that one false star cannot spoil a long run of attempts."""
+    out = []
+    for dj in range(1, n - 1):
+        for dk in range(1, n - dj):
+            for i in range(0, n - dj - dk):
+                out.append((i, i + dj, i + dj + dk))
+    return out
+
+
+def join_triangles(e_ij: np.ndarray, e_ik: np.ndarray, keys_jk: np.ndarray, n_stars: int) -> np.ndarray:
+    """Catalogue triples ``(a, b, c)`` with ``a-b`` in ``e_ij``, ``a-c`` in ``e_ik`` and ``b-c``
+    among ``keys_jk`` (sorted ``b * n_stars + c`` keys, both orientations). Vectorised."""
+    if len(e_ij) == 0 or len(e_ik) == 0 or len(keys_jk) == 0:
+        return np.zeros((0, 3), np.int64)
+    a_ik = e_ik[:, 0]
+    lo = np.searchsorted(a_ik, e_ij[:, 0], side="left")
+    hi = np.searchsorted(a_ik, e_ij[:, 0], side="right")
+    counts = hi - lo
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros((0, 3), np.int64)
+    rows = np.repeat(np.arange(len(e_ij)), counts)
+    offs = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
+    a = e_ij[rows, 0]
+    b = e_ij[rows, 1]
+    c = e_ik[lo[rows] + offs, 1]
+    ok = b != c
+    a, b, c = a[ok], b[ok], c[ok]
+    key = b * n_stars + c
+    pos = np.minimum(np.searchsorted(keys_jk, key), len(keys_jk) - 1)
+    hit = keys_jk[pos] == key
+    return np.column_stack([a[hit], b[hit], c[hit]])
+
+
+def edge_keys(e: np.ndarray, n_stars: int) -> np.ndarray:
+    """Sorted ``a * n_stars + b`` keys of directed edges."""
+    return np.sort(e[:, 0] * n_stars + e[:, 1])
+
+
+def same_handedness(vec: np.ndarray, tri_obs: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """Mask of candidate triples whose orientation (sign of the triple product) matches the
+    observed triangle's; a mirror image is never a match."""
+    s_obs = np.sign(np.linalg.det(tri_obs))
+    va, vb, vc = vec[cand[:, 0]], vec[cand[:, 1]], vec[cand[:, 2]]
+    s = np.einsum("ij,ij->i", va, np.cross(vb, vc))
+    return np.sign(s) == s_obs

@@ -1,0 +1,69 @@
+"""What every identification method provides, and the context it solves in."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..catalog import StarTable
+from ..navdb.reader import NavDatabase
+from ..verify import Observation, Verified, Verifier
+
+Progress = Callable[[str, float], None]
+
+
+@dataclass
+class SolveContext:
+    """Everything a matcher needs for one frame.
+
+    Attributes
+    ----------
+    obs : Observation
+        The frame's stars, brightest first, as body-frame unit vectors.
+    verifier : Verifier
+        Proves or refuses hypotheses.
+    tol_rad : float
+        Tolerance on an inter-star angle, radians (from the centroid noise).
+    deadline : float
+        ``time.perf_counter()`` value after which the matcher gives up.
+    max_stars : int
+        How many of the brightest stars a matcher may combine into patterns.
+    """
+
+    obs: Observation
+    verifier: Verifier
+    tol_rad: float
+    deadline: float
+    max_stars: int = 12
+
+    def expired(self) -> bool:
+        return time.perf_counter() > self.deadline
+
+
+class Matcher(Protocol):
+    """A method's solver over one opened database."""
+
+    def identify(self, ctx: SolveContext) -> Verified | None:
+        """Propose hypotheses to ``ctx.verifier`` until one is proven; None if none is."""
+        ...
+
+
+class Method(Protocol):
+    """An identification method: builds its tables, and makes a matcher over them."""
+
+    name: str
+    summary: str
+
+    def build_tables(
+        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Arrays to store under the method's group, and the parameters used."""
+        ...
+
+    def matcher(self, db: NavDatabase) -> Matcher:
+        """A matcher over the method's tables in ``db``."""
+        ...

@@ -1,0 +1,90 @@
+"""``pyramid``: star-pair look-ups confirmed by a fourth star (Mortari et al. 2004).
+
+Tables: every catalogue pair closer than ``max_angle_deg``, sorted by angle (binary search on
+the sorted angles plays the role of Mortari's k-vector: both are a range query over a sorted
+array; numpy's ``searchsorted`` is the faster of the two here). Identification: triangles of
+the brightest observed stars in the pyramid order; for each, the catalogue triples whose three
+sides agree within tolerance and whose handedness matches; each is confirmed by projecting the
+catalogue into the image, which demands at least one further star (the "fourth star" of the
+pyramid) and a coincidence probability below the verifier's bound.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..catalog import StarTable
+from ..geometry import pairwise_angles
+from ..navdb.reader import NavDatabase
+from ..verify import Verified
+from ._pairs import build_pair_table, directed_edges, edge_keys, join_triangles, pattern_order, same_handedness
+from .base import Progress, SolveContext
+
+MAX_CANDIDATES = 64
+"""Triangles matching more catalogue triples than this are skipped as uninformative."""
+
+
+class Pyramid:
+    name = "pyramid"
+    summary = "k-vector star pairs, triangles in pyramid order, confirmed by a fourth star (Mortari 2004)"
+
+    def build_tables(
+        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        max_deg = float(params.get("max_angle_deg", config.fov_max_deg))
+        progress("star pairs", 0.0)
+        pairs, angles = build_pair_table(stars.vec, math.radians(max_deg))
+        progress(f"{len(pairs)} pairs", 1.0)
+        return {"pairs": pairs, "angles": angles}, {"max_angle_deg": max_deg, "n_pairs": int(len(pairs))}
+
+    def matcher(self, db: NavDatabase) -> PyramidMatcher:
+        return PyramidMatcher(db)
+
+
+class PyramidMatcher:
+    def __init__(self, db: NavDatabase) -> None:
+        t = db.tables["pyramid"]
+        self.pairs = t["pairs"]
+        self.angles = t["angles"]
+        self.vec = db.stars.vec
+        self.n_stars = len(db.stars)
+        self.max_angle = math.radians(db.method_params("pyramid")["max_angle_deg"])
+
+    def identify(self, ctx: SolveContext) -> Verified | None:
+        obs = ctx.obs
+        n = min(len(obs), ctx.max_stars)
+        if n < 3:
+            return None
+        v = obs.vec[:n]
+        d = pairwise_angles(v)
+        tol = ctx.tol_rad
+        edges: dict[tuple[int, int], np.ndarray] = {}
+        keys: dict[tuple[int, int], np.ndarray] = {}
+
+        def edge(i: int, j: int) -> np.ndarray:
+            if (i, j) not in edges:
+                edges[(i, j)] = directed_edges(self.pairs, self.angles, d[i, j] - tol, d[i, j] + tol)
+            return edges[(i, j)]
+
+        for i, j, k in pattern_order(n):
+            if ctx.expired():
+                break
+            sides = (d[i, j], d[i, k], d[j, k])
+            if max(sides) > self.max_angle - tol or min(sides) < 4 * tol:
+                continue
+            if (j, k) not in keys:
+                keys[(j, k)] = edge_keys(edge(j, k), self.n_stars)
+            cand = join_triangles(edge(i, j), edge(i, k), keys[(j, k)], self.n_stars)
+            if len(cand) == 0:
+                continue
+            cand = cand[same_handedness(self.vec, v[[i, j, k]], cand)]
+            if len(cand) == 0 or len(cand) > MAX_CANDIDATES:
+                continue
+            for tri in cand:
+                found = ctx.verifier.check(np.array([i, j, k]), tri)
+                if found is not None:
+                    return found
+        return None

@@ -1,0 +1,185 @@
+"""Build a navigation database atomically.
+
+Arrays are written into a fresh hidden sibling directory, each file fsynced, the manifest
+last; then a symlink is swapped into place with ``os.replace`` (atomic on POSIX). A build that
+is killed half-way leaves the previous database untouched and only a stray ``.*.tmp-*``
+directory, which the next build removes.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..catalog import CATALOGUE_NAME, StarTable, load_hipparcos, select_stars
+from .format import FORMAT_NAME, MANIFEST, SCHEMA_VERSION, array_file, sha256_file
+
+Progress = Callable[[str, float], None]
+"""Progress callback: ``(stage description, fraction done in [0, 1])``."""
+
+
+def current_epoch() -> float:
+    """Today's date as a decimal year."""
+    now = dt.datetime.now(dt.UTC)
+    start = dt.datetime(now.year, 1, 1, tzinfo=dt.UTC)
+    return now.year + (now - start).total_seconds() / (365.25 * 86400)
+
+
+@dataclass(frozen=True)
+class BuildConfig:
+    """What a navigation database is built for.
+
+    Attributes
+    ----------
+    fov_max_deg : float
+        Largest camera field served, degrees (the diagonal of the widest camera's image).
+    fov_min_deg : float
+        Smallest camera field served, degrees (the side of the narrowest camera).
+    mag_limit : float
+        Faintest star kept, approximate Johnson V.
+    epoch : float
+        Decimal year the positions are propagated to.
+    double_star_sep_deg : float
+        Stars closer than this are merged (degrees).
+    density_cap : int or None
+        At most this many brighter stars within ``density_radius_deg`` of a kept star.
+    methods : tuple of str
+        Methods whose tables to build (``"all"`` = every registered method).
+    method_params : dict
+        Per-method overrides of table parameters, ``{method: {param: value}}``.
+    """
+
+    fov_max_deg: float = 12.0
+    fov_min_deg: float = 6.0
+    mag_limit: float = 6.5
+    epoch: float = field(default_factory=lambda: round(current_epoch(), 2))
+    double_star_sep_deg: float = 0.02
+    density_cap: int | None = None
+    density_radius_deg: float = 5.0
+    methods: tuple[str, ...] = ("pyramid", "maxangle")
+    method_params: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+def _noop(stage: str, frac: float) -> None:
+    return None
+
+
+def _write_array(directory: Path, name: str, arr: np.ndarray) -> dict[str, Any]:
+    arr = np.ascontiguousarray(arr)
+    fname = array_file(name)
+    fpath = directory / fname
+    with open(fpath, "wb") as fh:
+        np.lib.format.write_array(fh, arr, allow_pickle=False)
+        fh.flush()
+        os.fsync(fh.fileno())
+    return {"file": fname, "dtype": arr.dtype.str, "shape": list(arr.shape), "sha256": sha256_file(fpath)}
+
+
+def build_database(out: str | os.PathLike[str], config: BuildConfig, *, progress: Progress = _noop) -> Path:
+    """Build a database for ``config`` at ``out`` (replacing any database there atomically).
+
+    Returns the path. ``out`` becomes a symlink to a versioned sibling directory
+    ``.<name>.<timestamp>``; readers only ever see a complete database.
+    """
+    from ..methods import get_method, method_names
+
+    t0 = time.perf_counter()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    for stale in out.parent.glob(f".{out.name}.tmp-*"):
+        shutil.rmtree(stale, ignore_errors=True)
+    stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%S%f")
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{stamp}"
+    tmp.mkdir()
+
+    progress("reading the Hipparcos catalogue", 0.0)
+    cat = load_hipparcos()
+    stars: StarTable = select_stars(
+        cat,
+        epoch=config.epoch,
+        mag_limit=config.mag_limit,
+        double_star_sep_deg=config.double_star_sep_deg,
+        density_cap=config.density_cap,
+        density_radius_deg=config.density_radius_deg,
+    )
+    arrays_meta: dict[str, Any] = {}
+    for name, arr in (("stars/hip", stars.hip), ("stars/vec", stars.vec), ("stars/mag", stars.mag)):
+        arrays_meta[name] = _write_array(tmp, name, arr)
+    progress(f"{len(stars)} navigation stars selected", 0.1)
+
+    names = method_names() if "all" in config.methods else list(config.methods)
+    methods_meta: dict[str, Any] = {}
+    for i, mname in enumerate(names):
+        method = get_method(mname)
+        lo, hi = 0.1 + 0.85 * i / len(names), 0.1 + 0.85 * (i + 1) / len(names)
+
+        def sub(stage: str, frac: float, lo: float = lo, hi: float = hi, m: str = mname) -> None:
+            progress(f"{m}: {stage}", lo + (hi - lo) * frac)
+
+        tables, params = method.build_tables(stars, config, config.method_params.get(mname, {}), sub)
+        for key, arr in tables.items():
+            arrays_meta[f"{mname}/{key}"] = _write_array(tmp, f"{mname}/{key}", arr)
+        methods_meta[mname] = params
+
+    manifest = {
+        "format": FORMAT_NAME,
+        "schema_version": SCHEMA_VERSION,
+        "catalogue": {"name": CATALOGUE_NAME, "sha256": cat.sha256},
+        "built_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "build_seconds": round(time.perf_counter() - t0, 3),
+        "epoch": config.epoch,
+        "mag_limit": config.mag_limit,
+        "fov_min_deg": config.fov_min_deg,
+        "fov_max_deg": config.fov_max_deg,
+        "n_stars": len(stars),
+        "config": asdict(config),
+        "methods": methods_meta,
+        "arrays": arrays_meta,
+    }
+    mpath = tmp / MANIFEST
+    with open(mpath, "w") as fh:
+        json.dump(manifest, fh, indent=1)
+        fh.flush()
+        os.fsync(fh.fileno())
+    final = out.parent / f".{out.name}.{stamp}"
+    os.rename(tmp, final)
+    _swap_symlink(out, final)
+    _fsync_dir(out.parent)
+    progress("done", 1.0)
+    return out
+
+
+def _swap_symlink(out: Path, target: Path) -> None:
+    """Point ``out`` at ``target`` atomically and remove what it pointed at before."""
+    old: Path | None = None
+    if out.is_symlink():
+        old = out.parent / os.readlink(out)
+    elif out.exists():
+        # a plain directory from elsewhere: move it aside first (not atomic, but never lost)
+        aside = out.parent / f".{out.name}.replaced-{os.getpid()}"
+        os.rename(out, aside)
+        old = aside
+    link_tmp = out.parent / f".{out.name}.link-{os.getpid()}"
+    if link_tmp.is_symlink():
+        link_tmp.unlink()
+    os.symlink(target.name, link_tmp)
+    os.replace(link_tmp, out)
+    if old is not None and old.resolve() != target.resolve():
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

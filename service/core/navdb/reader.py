@@ -1,0 +1,126 @@
+"""Open a navigation database memory-mapped and check it before use."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..catalog import StarTable
+from ..errors import DatabaseCorruptError, DatabaseMissingError
+from .format import FORMAT_NAME, MANIFEST, SCHEMA_VERSION, STAR_ARRAYS, array_file, sha256_file
+
+
+@dataclass(frozen=True)
+class NavDatabase:
+    """An opened navigation database: read-only memory-mapped arrays plus the manifest.
+
+    ``stars`` holds the navigation stars; ``tables[method]`` maps each method's array names to
+    arrays. Every array is a read-only ``np.memmap`` view, so worker processes share pages.
+    """
+
+    path: Path
+    manifest: dict[str, Any]
+    stars: StarTable
+    tables: dict[str, dict[str, np.ndarray]]
+
+    @property
+    def methods(self) -> list[str]:
+        """Methods whose tables this database holds."""
+        return list(self.manifest.get("methods", {}))
+
+    def method_params(self, method: str) -> dict[str, Any]:
+        """Build parameters the method's tables were made with."""
+        return dict(self.manifest.get("methods", {}).get(method, {}))
+
+    @property
+    def epoch(self) -> float:
+        return float(self.manifest["epoch"])
+
+    @property
+    def mag_limit(self) -> float:
+        return float(self.manifest["mag_limit"])
+
+    @property
+    def max_fov_deg(self) -> float:
+        return float(self.manifest["fov_max_deg"])
+
+
+def _read_manifest(path: Path) -> dict[str, Any]:
+    mpath = path / MANIFEST
+    if not path.exists():
+        raise DatabaseMissingError(f"no navigation database at {path}")
+    if not mpath.is_file():
+        raise DatabaseCorruptError(f"{mpath}: manifest missing (incomplete or foreign directory)")
+    try:
+        manifest = json.loads(mpath.read_text())
+    except (OSError, ValueError) as exc:
+        raise DatabaseCorruptError(f"{mpath}: unreadable manifest ({exc})") from exc
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT_NAME:
+        raise DatabaseCorruptError(f"{mpath}: not a {FORMAT_NAME} manifest")
+    if manifest.get("schema_version") != SCHEMA_VERSION:
+        raise DatabaseCorruptError(
+            f"{mpath}: schema version {manifest.get('schema_version')!r}, this skyfix reads "
+            f"{SCHEMA_VERSION}; rebuild with `skyfix db build`"
+        )
+    return manifest
+
+
+def _open_array(path: Path, name: str, spec: dict[str, Any]) -> np.ndarray:
+    fpath = path / spec["file"]
+    if spec["file"] != array_file(name):
+        raise DatabaseCorruptError(f"{path / MANIFEST}: array {name} names file {spec['file']!r}")
+    if not fpath.is_file():
+        raise DatabaseCorruptError(f"{fpath}: missing")
+    try:
+        with open(fpath, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, fortran, dtype = reader(fh)
+            offset = fh.tell()
+    except (OSError, ValueError) as exc:
+        raise DatabaseCorruptError(f"{fpath}: not a valid .npy file ({exc})") from exc
+    if dtype.hasobject:
+        raise DatabaseCorruptError(f"{fpath}: object arrays are refused")
+    if list(shape) != list(spec["shape"]) or dtype.str != np.dtype(spec["dtype"]).str or fortran:
+        raise DatabaseCorruptError(
+            f"{fpath}: shape {shape} dtype {dtype.str}, manifest says {tuple(spec['shape'])} {spec['dtype']}"
+        )
+    expected = offset + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    size = os.path.getsize(fpath)
+    if size != expected:
+        raise DatabaseCorruptError(f"{fpath}: {size} bytes, expected {expected} (truncated or padded)")
+    if expected == offset:
+        return np.zeros(shape, dtype=dtype)
+    return np.load(fpath, mmap_mode="r", allow_pickle=False)
+
+
+def open_database(path: str | os.PathLike[str], *, verify_hashes: bool = False) -> NavDatabase:
+    """Open the database at ``path`` memory-mapped.
+
+    Checks the manifest's format and schema version, and every array's presence, header,
+    dtype, shape and file size; ``verify_hashes`` also checks sha256 (what ``skyfix db verify``
+    does). Raises ``DatabaseMissingError`` or ``DatabaseCorruptError`` naming the file.
+    """
+    p = Path(path)
+    manifest = _read_manifest(p)
+    arrays: dict[str, np.ndarray] = {}
+    specs = manifest.get("arrays", {})
+    for name in STAR_ARRAYS:
+        if name not in specs:
+            raise DatabaseCorruptError(f"{p / MANIFEST}: array {name} missing from the manifest")
+    for name, spec in specs.items():
+        arrays[name] = _open_array(p, name, spec)
+        if verify_hashes and sha256_file(p / spec["file"]) != spec["sha256"]:
+            raise DatabaseCorruptError(f"{p / spec['file']}: sha256 does not match the manifest")
+    stars = StarTable(arrays["stars/hip"], arrays["stars/vec"], arrays["stars/mag"])
+    tables: dict[str, dict[str, np.ndarray]] = {}
+    for name, arr in arrays.items():
+        group, key = name.split("/", 1)
+        if group != "stars":
+            tables.setdefault(group, {})[key] = arr
+    return NavDatabase(p, manifest, stars, tables)

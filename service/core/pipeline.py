@@ -1,0 +1,204 @@
+"""One frame in, one answer out: centroids (or an image) -> identified stars and attitude.
+
+Every stage is timed into ``Solution.timings_ms``: ``vectors`` (camera model), ``identify``
+(the methods, verification included), ``attitude`` (final fit and diagnostics), ``total``;
+``detect`` too when the input is an image.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .attitude import ARCSEC_PER_RAD, estimate, matrix_to_quat, quat_to_matrix, radec_roll
+from .camera import Camera
+from .errors import InvalidInputError
+from .methods import SolveContext, get_matcher, resolve
+from .navdb.reader import NavDatabase
+from .types import Centroids, Solution, SolveStatus, StarMatch
+from .verify import Observation, Verified, Verifier
+
+Quaternion = Sequence[float]
+
+
+@dataclass(frozen=True, slots=True)
+class SolveOptions:
+    """Tuning knobs of a solve (defaults suit 0-2 px centroid noise).
+
+    Attributes
+    ----------
+    centroid_sigma_px : float
+        Expected centroid error per axis, px. Sets the pattern tolerance (3 sigma, both stars)
+        and the match radius.
+    match_radius_px : float or None
+        Radius for pairing observed and predicted stars, px (default ``max(2.5, 3 sigma)``).
+    max_false_prob : float
+        Largest accepted probability that the identification is a coincidence.
+    max_stars : int
+        Brightest stars a method may combine into patterns.
+    timeout_ms : float
+        Give up after this long.
+    """
+
+    centroid_sigma_px: float = 1.0
+    match_radius_px: float | None = None
+    max_false_prob: float = 1e-6
+    max_stars: int = 12
+    timeout_ms: float = 500.0
+
+
+DEFAULT_OPTIONS = SolveOptions()
+
+
+def solve(
+    centroids: Centroids,
+    camera: Camera,
+    db: NavDatabase,
+    *,
+    method: str = "auto",
+    hint: tuple[Quaternion, float] | None = None,
+    options: SolveOptions = DEFAULT_OPTIONS,
+) -> Solution:
+    """Identify the stars of one camera frame.
+
+    Parameters
+    ----------
+    centroids : Centroids
+        Star positions (px) and fluxes.
+    camera : Camera
+    db : NavDatabase
+    method : str
+        A registered method or ``"auto"``.
+    hint : (quaternion [w, x, y, z], radius_deg), optional
+        Prior attitude; answers whose boresight lies farther than ``radius_deg`` are refused.
+    """
+    identity = np.eye(3)
+    return solve_rig([(centroids, camera, None)], db, method=method, hint=hint, options=options,
+                     _mountings=[identity])
+
+
+def solve_rig(
+    frames: Sequence[tuple[Centroids, Camera, Quaternion | None]],
+    db: NavDatabase,
+    *,
+    method: str = "auto",
+    hint: tuple[Quaternion, float] | None = None,
+    options: SolveOptions = DEFAULT_OPTIONS,
+    _mountings: list[np.ndarray] | None = None,
+) -> Solution:
+    """Identify the stars of several cameras fixed to one body, fired at the same instant.
+
+    ``frames`` holds ``(centroids, camera, mounting)`` with ``mounting`` the quaternion
+    rotating body vectors into that camera (None = identity). The answer's quaternion rotates
+    ICRS into the body frame.
+    """
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+    methods = resolve(db, method)
+    if not frames:
+        raise InvalidInputError("cameras", "at least one camera frame is required")
+    mountings = _mountings or [np.eye(3) if m is None else quat_to_matrix(np.asarray(m, float)) for _, _, m in frames]
+    obs = _observation(frames, mountings)
+    t1 = time.perf_counter()
+    timings["vectors"] = (t1 - t0) * 1e3
+    sigma = options.centroid_sigma_px
+    radius = options.match_radius_px or max(2.5, 3.0 * sigma)
+    scale = obs.pixel_scale_rad
+    tol = (3.0 * math.sqrt(2.0) * sigma + 0.5) * scale
+    verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob)
+    deadline = t0 + options.timeout_ms / 1e3
+    found: Verified | None = None
+    used = methods[-1] if methods else method
+    for name in methods:
+        ctx = SolveContext(obs, verifier, tol, deadline, options.max_stars)
+        found = get_matcher(db, name).identify(ctx)
+        if found is not None and hint is not None and not _near_hint(found.matrix, hint):
+            found = None
+        if found is not None:
+            used = name
+            break
+    t2 = time.perf_counter()
+    timings["identify"] = (t2 - t1) * 1e3
+    if found is None:
+        timings["total"] = (time.perf_counter() - t0) * 1e3
+        return Solution(SolveStatus.NO_SOLUTION, used, timings_ms=timings)
+    sol = _solution(obs, db, found, used, sigma * scale)
+    timings["attitude"] = (time.perf_counter() - t2) * 1e3
+    timings["total"] = (time.perf_counter() - t0) * 1e3
+    object.__setattr__(sol, "timings_ms", timings)
+    return sol
+
+
+def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: list[np.ndarray]) -> Observation:
+    vecs, xys, idx, cams, fluxes = [], [], [], [], []
+    for c, (cents, cam, _) in enumerate(frames):
+        if len(cents) == 0:
+            continue
+        v_cam = cam.pixel_to_vector(cents.xy)
+        vecs.append(v_cam @ mountings[c])  # body = M^T cam, for row vectors
+        xys.append(cents.xy)
+        idx.append(np.arange(len(cents)))
+        cams.append(np.full(len(cents), c))
+        fluxes.append(cents.flux)
+    if not vecs:
+        z = np.zeros((0, 3))
+        return Observation(z, np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                           tuple(f[1] for f in frames), tuple(mountings))
+    flux = np.concatenate(fluxes)
+    order = np.argsort(-flux, kind="stable")
+    return Observation(
+        np.concatenate(vecs)[order],
+        np.concatenate(xys)[order],
+        np.concatenate(idx)[order].astype(np.int64),
+        np.concatenate(cams)[order].astype(np.int64),
+        tuple(f[1] for f in frames),
+        tuple(mountings),
+    )
+
+
+def _near_hint(r: np.ndarray, hint: tuple[Quaternion, float]) -> bool:
+    q, radius_deg = hint
+    rh = quat_to_matrix(np.asarray(q, dtype=float))
+    cosang = float(np.clip(r[2] @ rh[2], -1, 1))
+    return math.degrees(math.acos(cosang)) <= radius_deg
+
+
+def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_rad: float) -> Solution:
+    ref = np.asarray(db.stars.vec[v.cat])
+    fit = estimate(obs.vec[v.obs], ref, sigma_rad=None)
+    ra, dec, roll = radec_roll(fit.matrix)
+    cat_ra = np.degrees(np.mod(np.arctan2(ref[:, 1], ref[:, 0]), 2 * np.pi))
+    cat_dec = np.degrees(np.arcsin(np.clip(ref[:, 2], -1, 1)))
+    order = np.lexsort((obs.index[v.obs], obs.camera[v.obs]))
+    stars = tuple(
+        StarMatch(
+            centroid=int(obs.index[v.obs[i]]),
+            hip=int(db.stars.hip[v.cat[i]]),
+            ra_deg=float(cat_ra[i]),
+            dec_deg=float(cat_dec[i]),
+            mag=round(float(db.stars.mag[v.cat[i]]), 3),
+            residual_arcsec=round(float(fit.residuals_arcsec[i]), 3),
+            camera=int(obs.camera[v.obs[i]]),
+        )
+        for i in order
+    )
+    q = matrix_to_quat(fit.matrix)
+    return Solution(
+        SolveStatus.SOLVED,
+        method,
+        quaternion=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+        ra_deg=ra,
+        dec_deg=dec,
+        roll_deg=roll,
+        stars=stars,
+        rms_arcsec=fit.rms_arcsec,
+        false_match_probability=v.false_prob,
+        attitude_sigma_arcsec=fit.sigma_arcsec,
+    )
+
+
+__all__ = ["ARCSEC_PER_RAD", "DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_rig"]

@@ -1,0 +1,139 @@
+"""Small value types that flow between the engine's stages.
+
+Conventions (see docs/conventions.md): pixel x = column, y = row, the centre of the top-left
+pixel is (0, 0); quaternions are scalar first ``[w, x, y, z]`` and rotate ICRS vectors into the
+camera (or body) frame, ``v_cam = R(q) v_icrs``.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import InvalidInputError
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+class SolveStatus(str, enum.Enum):
+    """Outcome of one solve: expected failure is a value, not an exception."""
+
+    SOLVED = "solved"
+    NO_SOLUTION = "no_solution"
+
+
+@dataclass(frozen=True, slots=True)
+class Centroids:
+    """Star centroids of one camera frame.
+
+    Attributes
+    ----------
+    xy : (N, 2) float64
+        Pixel positions ``(x, y)``: x = column, y = row, origin the centre of the top-left pixel.
+    flux : (N,) float64
+        Integrated brightness (any linear unit); larger is brighter. Used for ordering only.
+    """
+
+    xy: FloatArray
+    flux: FloatArray
+
+    @classmethod
+    def from_list(cls, rows: Any, *, field_name: str = "centroids") -> Centroids:
+        """Build from ``[[x, y], ...]`` or ``[[x, y, flux], ...]``; rows without flux get
+        flux decreasing with their index (the list is taken as brightest first)."""
+        arr = np.asarray(rows, dtype=np.float64)
+        if arr.size == 0:
+            return cls(np.zeros((0, 2)), np.zeros(0))
+        if arr.ndim != 2 or arr.shape[1] not in (2, 3):
+            raise InvalidInputError(field_name, "expected a list of [x, y] or [x, y, flux] rows")
+        if not np.all(np.isfinite(arr)):
+            raise InvalidInputError(field_name, "values must be finite numbers")
+        xy = np.ascontiguousarray(arr[:, :2])
+        flux = arr[:, 2].copy() if arr.shape[1] == 3 else np.arange(len(arr), 0, -1, dtype=np.float64)
+        return cls(xy, flux)
+
+    def __len__(self) -> int:
+        return int(self.xy.shape[0])
+
+    def brightest_order(self) -> IntArray:
+        """Indices sorted by decreasing flux (stable)."""
+        return np.argsort(-self.flux, kind="stable").astype(np.int64)
+
+
+@dataclass(frozen=True, slots=True)
+class StarMatch:
+    """One identified star: an input centroid paired with a catalogue star."""
+
+    centroid: int
+    hip: int
+    ra_deg: float
+    dec_deg: float
+    mag: float
+    residual_arcsec: float
+    camera: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Solution:
+    """Result of one solve.
+
+    ``quaternion`` rotates ICRS into the camera frame (or the body frame of a rig), scalar
+    first. ``ra_deg``/``dec_deg`` are the boresight (+z) direction; ``roll_deg`` is the position
+    angle of image-up (-y) at the boresight, from north through east, in [0, 360).
+    """
+
+    status: SolveStatus
+    method: str
+    quaternion: tuple[float, float, float, float] | None = None
+    ra_deg: float | None = None
+    dec_deg: float | None = None
+    roll_deg: float | None = None
+    stars: tuple[StarMatch, ...] = ()
+    rms_arcsec: float | None = None
+    false_match_probability: float | None = None
+    attitude_sigma_arcsec: tuple[float, float, float] | None = None
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def solved(self) -> bool:
+        return self.status is SolveStatus.SOLVED
+
+    def to_dict(self, frame_id: Any = None) -> dict[str, Any]:
+        """The result schema shared by the CLI and the API (JSON-ready)."""
+
+        def num(v: float | None) -> float | None:
+            return None if v is None or not math.isfinite(v) else float(v)
+
+        return {
+            "id": frame_id,
+            "status": self.status.value,
+            "quaternion": None if self.quaternion is None else [float(v) for v in self.quaternion],
+            "ra_deg": num(self.ra_deg),
+            "dec_deg": num(self.dec_deg),
+            "roll_deg": num(self.roll_deg),
+            "stars": [
+                {
+                    "centroid": s.centroid,
+                    "camera": s.camera,
+                    "hip": s.hip,
+                    "ra_deg": s.ra_deg,
+                    "dec_deg": s.dec_deg,
+                    "mag": s.mag,
+                    "residual_arcsec": s.residual_arcsec,
+                }
+                for s in self.stars
+            ],
+            "rms_arcsec": num(self.rms_arcsec),
+            "false_match_probability": num(self.false_match_probability),
+            "attitude_sigma_arcsec": None
+            if self.attitude_sigma_arcsec is None
+            else [float(v) for v in self.attitude_sigma_arcsec],
+            "method": self.method,
+            "timings_ms": {k: float(v) for k, v in self.timings_ms.items()},
+        }

@@ -1,0 +1,166 @@
+"""Shared verification: from a proposed match to a proven one, or a refusal.
+
+A method proposes a few (observed star, catalogue star) pairs. The verifier fits the attitude,
+projects every catalogue star in the field into each camera, pairs observed and predicted
+stars within ``match_radius_px`` (mutual nearest neighbours), refits with all pairs, and
+bounds the probability that so many pairs arise by chance:
+
+``P = n_trials * P[Binomial(n_free, p) >= n_extra]``, with ``p`` = the fraction of the image
+lying within the match radius of some predicted star (``n_pred * pi r^2 / area``), ``n_free``
+the observed stars not used by the hypothesis and ``n_extra`` those of them that matched.
+``n_trials`` is the number of hypotheses the method tried (the look-elsewhere factor). A
+match is accepted when ``P <= max_false_prob``. No method returns an unverified answer.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import betainc
+
+from .attitude import ARCSEC_PER_RAD, wahba_svd
+from .camera import Camera
+from .navdb.reader import NavDatabase
+from .types import FloatArray, IntArray
+
+
+@dataclass(frozen=True)
+class Observation:
+    """Observed stars of one frame (all cameras), brightest first.
+
+    Attributes
+    ----------
+    vec : (N, 3) float64
+        Unit vectors in the body frame (for one camera: the camera frame).
+    xy : (N, 2) float64
+        Pixel positions in their own camera.
+    index : (N,) int64
+        Index of each star in its camera's input centroid list.
+    camera : (N,) int64
+        Camera of each star.
+    cameras : tuple of Camera
+    mountings : tuple of (3, 3) arrays
+        Body -> camera rotation matrices.
+    """
+
+    vec: FloatArray
+    xy: FloatArray
+    index: IntArray
+    camera: IntArray
+    cameras: tuple[Camera, ...]
+    mountings: tuple[FloatArray, ...]
+    by_camera: tuple[IntArray, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        if not self.by_camera:
+            object.__setattr__(
+                self, "by_camera", tuple(np.flatnonzero(self.camera == c) for c in range(len(self.cameras)))
+            )
+
+    def __len__(self) -> int:
+        return int(self.vec.shape[0])
+
+    @property
+    def pixel_scale_rad(self) -> float:
+        """Coarsest pixel scale among the cameras, radians per pixel."""
+        return max(c.pixel_scale_rad for c in self.cameras)
+
+
+@dataclass(frozen=True)
+class Verified:
+    """A proven identification."""
+
+    obs: IntArray  # rows of the Observation
+    cat: IntArray  # rows of the star table
+    matrix: FloatArray  # ICRS -> body
+    false_prob: float
+    n_trials: int
+
+
+@dataclass
+class Verifier:
+    """Checks hypotheses against one frame; counts how many it was asked (``trials``)."""
+
+    db: NavDatabase
+    obs: Observation
+    match_radius_px: float = 4.0
+    max_false_prob: float = 1e-6
+    min_matches: int = 4
+    trials: int = 0
+
+    def check(self, obs_idx: IntArray, cat_idx: IntArray, *, n_trials: int | None = None) -> Verified | None:
+        """Verify a hypothesis pairing ``obs_idx`` rows with catalogue rows ``cat_idx``.
+
+        ``n_trials`` overrides the look-elsewhere factor (default: hypotheses checked so far).
+        """
+        self.trials += 1
+        obs_idx = np.asarray(obs_idx, dtype=np.int64)
+        cat_idx = np.asarray(cat_idx, dtype=np.int64)
+        if len(np.unique(cat_idx)) != len(cat_idx):
+            return None
+        stars = self.db.stars.vec
+        obs = self.obs
+        r = wahba_svd(obs.vec[obs_idx], stars[cat_idx])
+        # quick reject: the hypothesis' own stars must fit the attitude
+        scale = obs.pixel_scale_rad
+        pred = stars[cat_idx] @ r.T
+        err = np.linalg.norm(pred - obs.vec[obs_idx], axis=1)
+        if np.any(err > self.match_radius_px * scale * 1.5):
+            return None
+        m_obs, m_cat, p_single = self._match_all(r)
+        if len(m_obs) < max(len(obs_idx), 3):
+            return None
+        r = wahba_svd(obs.vec[m_obs], stars[m_cat])
+        m_obs, m_cat, p_single = self._match_all(r)
+        hyp = np.isin(m_obs, obs_idx)
+        n_extra = int(len(m_obs) - hyp.sum())
+        n_free = len(obs) - len(obs_idx)
+        if len(m_obs) < self.min_matches or n_extra < 1:
+            return None
+        tail = float(betainc(n_extra, n_free - n_extra + 1, min(p_single, 1.0))) if n_free >= n_extra else 1.0
+        trials = self.trials if n_trials is None else n_trials
+        prob = min(1.0, tail * max(trials, 1))
+        if prob > self.max_false_prob:
+            return None
+        r = wahba_svd(obs.vec[m_obs], stars[m_cat])
+        return Verified(m_obs, m_cat, r, prob, trials)
+
+    def _match_all(self, r_body: FloatArray) -> tuple[IntArray, IntArray, float]:
+        """Pair observed and predicted stars in every camera; also return the chance that a
+        random point falls within the match radius of a predicted star."""
+        obs = self.obs
+        stars = self.db.stars.vec
+        all_obs: list[IntArray] = []
+        all_cat: list[IntArray] = []
+        area = 0.0
+        covered = 0.0
+        rad2 = self.match_radius_px**2
+        for c, cam in enumerate(obs.cameras):
+            r_cam = obs.mountings[c] @ r_body
+            cos_lim = math.cos(math.radians(cam.diagonal_fov_deg / 2 + 0.2))
+            near = np.flatnonzero(stars @ r_cam[2] > cos_lim)
+            pxy, inside = cam.vector_to_pixel(stars[near] @ r_cam.T)
+            near, pxy = near[inside], pxy[inside]
+            area += cam.width * cam.height
+            covered += len(near) * math.pi * rad2
+            rows = obs.by_camera[c]
+            if len(rows) == 0 or len(near) == 0:
+                continue
+            d2 = ((obs.xy[rows, None, :] - pxy[None, :, :]) ** 2).sum(axis=2)
+            best_cat = d2.argmin(axis=1)
+            best_obs = d2.argmin(axis=0)
+            ok = (d2[np.arange(len(rows)), best_cat] <= rad2) & (best_obs[best_cat] == np.arange(len(rows)))
+            all_obs.append(rows[ok])
+            all_cat.append(near[best_cat[ok]])
+        if not all_obs:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), 1.0
+        return np.concatenate(all_obs), np.concatenate(all_cat), covered / max(area, 1.0)
+
+
+def residuals_arcsec(obs: Observation, db: NavDatabase, v: Verified) -> FloatArray:
+    """Per-match angular residual, arcsec."""
+    pred = db.stars.vec[v.cat] @ v.matrix.T
+    chord = np.linalg.norm(pred - obs.vec[v.obs], axis=1)
+    return 2 * np.arcsin(np.clip(chord / 2, 0, 1)) * ARCSEC_PER_RAD

@@ -230,10 +230,12 @@ class StreamAck(BaseModel):
 
 
 class StreamError(BaseModel):
-    """Reply to a WebSocket message that could not be solved; the stream goes on."""
+    """Reply to a WebSocket message that could not be solved; the stream goes on.
+
+    It has no ``status`` key: a reply with ``status`` is a ``SolveResult`` (or a ``StreamAck``).
+    """
 
     id: FrameId = Field(None, description="The frame's id (its message number if it had none).")
-    status: Literal["error"] = "error"
     code: int = Field(description="The HTTP status the same input would get over REST (400, 413, 422, 504...).")
     detail: str
     field: str | None = None

@@ -1,0 +1,142 @@
+"""``WS /v1/stream``: one frame per message, one reply per message, in order.
+
+A text message is a JSON ``SolveRequest`` (centroids) or a ``{"type": "config", ...}``
+message (``StreamConfig``: camera, fov_deg, method, track for the frames that follow; answered
+with a ``StreamAck``). A binary message is an image, solved with the connection's camera (query
+parameters or the last config). Replies: a ``SolveResult``, or a ``StreamError`` for a frame
+that cannot be solved; either way the stream goes on. A frame without an id gets its message
+number (0-based). With ``track=true`` each solution is the attitude hint of the next frame.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import partial
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
+from pydantic import ValidationError
+
+from client.models import CameraSpec, SolveRequest, SolveResult, StreamAck, StreamConfig, StreamError
+
+from ...core import pipeline
+from ...core.centroid import decode_image
+from ...core.errors import SkyfixError
+from .. import convert
+from ..deps import API_KEY_HEADER, CamerasDep, NavDbDep, SettingsDep, SolverDep, key_ok
+from ..errors import ApiError, error_status
+
+router = APIRouter(prefix="/v1", tags=["stream"])
+
+
+@dataclass(slots=True)
+class StreamState:
+    """A connection's settings and tracking state."""
+
+    camera: CameraSpec | str | None
+    fov_deg: float | None
+    method: str
+    track: bool
+    hint_radius_deg: float
+    last: convert.Hint | None = None
+    seq: int = 0
+
+
+@router.websocket("/stream")
+async def stream(
+    ws: WebSocket, db: NavDbDep, solver: SolverDep, cameras: CamerasDep, settings: SettingsDep,
+    track: Annotated[bool, Query(description="Use each solution as the next frame's attitude hint.")] = False,
+    camera: Annotated[str | None, Query(max_length=4096, description="Image frames: camera JSON or name.")] = None,
+    fov_deg: Annotated[float | None, Query(gt=0, lt=170, description="Image frames: horizontal FOV, deg.")] = None,
+    method: Annotated[str, Query(max_length=32)] = "auto",
+    hint_radius_deg: Annotated[float, Query(gt=0, le=180)] = 5.0,
+    api_key: Annotated[str | None, Query(description="For clients that cannot send X-API-Key.")] = None,
+) -> None:
+    if not key_ok(settings, ws.headers.get(API_KEY_HEADER) or api_key):
+        await ws.close(code=1008, reason="missing or wrong API key")
+        return
+    await ws.accept()
+    frames = _Frames(db, solver, cameras, settings, StreamState(camera, fov_deg, method, track, hint_radius_deg))
+    try:
+        while True:
+            msg = await ws.receive()
+            if msg["type"] == "websocket.disconnect":
+                return
+            await ws.send_text(await frames.handle(msg.get("text"), msg.get("bytes")))
+    except WebSocketDisconnect:
+        return
+
+
+class _Frames:
+    """Turns one message into one reply (text)."""
+
+    def __init__(self, db: Any, solver: Any, cameras: Any, settings: Any, state: StreamState) -> None:
+        self.db, self.solver, self.cameras, self.settings, self.state = db, solver, cameras, settings, state
+
+    async def handle(self, text: str | None, data: bytes | None) -> str:
+        seq = self.state.seq
+        self.state.seq += 1
+        frame_id: str | int = seq
+        kind = "image" if data is not None else "json"
+        try:
+            if data is not None:
+                sol = await self._image(data)
+            else:
+                obj = self._parse(text or "")
+                if isinstance(obj, dict) and isinstance(obj.get("id"), str | int):
+                    frame_id = obj["id"]
+                if isinstance(obj, dict) and obj.get("type") == "config":
+                    kind = "config"
+                    return self._configure(obj)
+                sol = await self._centroids(SolveRequest.model_validate(obj))
+        except (SkyfixError, ValidationError, ApiError) as exc:
+            self.solver.metrics.ws_frames[f"{kind}_error"] += 1
+            code, detail, field = error_status(exc)
+            return StreamError(id=frame_id, code=code, detail=detail, field=field).model_dump_json()
+        self.solver.metrics.ws_frames[kind] += 1
+        if self.state.track:
+            self.state.last = (sol.quaternion, self.state.hint_radius_deg) if sol.solved else None  # type: ignore[assignment]
+        return SolveResult.model_validate(sol.to_dict(frame_id)).model_dump_json()
+
+    def _parse(self, text: str) -> Any:
+        if len(text) > self.settings.max_body_bytes:
+            raise ApiError(413, f"message is {len(text)} bytes, the limit is {self.settings.max_body_bytes}", "body")
+        try:
+            return json.loads(text)
+        except ValueError as exc:
+            raise ApiError(400, f"message is not valid JSON: {exc}", "body") from None
+
+    async def _centroids(self, req: SolveRequest) -> Any:
+        track = self.state.last if self.state.track else None
+        call = convert.frame_call(req, self.db, self.cameras, max_centroids=self.settings.max_centroids,
+                                  options=self.solver.options, track_hint=track)
+        return await self.solver.solve(call)
+
+    async def _image(self, data: bytes) -> Any:
+        st = self.state
+        if len(data) > self.settings.max_image_bytes:
+            raise ApiError(413, f"image is {len(data)} bytes, the limit is {self.settings.max_image_bytes}", "image")
+        convert.check_method(self.db, st.method)
+        pixels = await self.solver.run(partial(decode_image, data, max_pixels=self.settings.max_image_pixels))
+        cam = convert.image_camera(st.camera, st.fov_deg, pixels.shape, self.cameras)
+        return await self.solver.solve(partial(pipeline.solve_image, pixels, cam, self.db, method=st.method,
+                                               options=self.solver.options))
+
+    def _configure(self, obj: dict[str, Any]) -> str:
+        cfg = StreamConfig.model_validate(obj)
+        st = self.state
+        if cfg.method is not None:
+            convert.check_method(self.db, cfg.method)
+            st.method = cfg.method
+        if isinstance(cfg.camera, CameraSpec):
+            convert.camera_entry(cfg.camera, "camera")
+        elif cfg.camera is not None:
+            convert.parse_camera_field(cfg.camera, "camera", self.cameras)
+        for name in ("camera", "fov_deg", "track", "hint_radius_deg"):
+            if getattr(cfg, name) is not None:
+                setattr(st, name, getattr(cfg, name))
+        if not st.track:
+            st.last = None
+        return StreamAck(camera=st.camera, fov_deg=st.fov_deg, method=st.method, track=st.track,
+                         hint_radius_deg=st.hint_radius_deg).model_dump_json()

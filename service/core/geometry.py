@@ -44,3 +44,12 @@ def pairwise_angles(v: FloatArray) -> FloatArray:
     """``(N, N)`` matrix of angles in radians between the rows of ``v`` ``(N, 3)``."""
     d = v[:, None, :] - v[None, :, :]
     return 2.0 * np.arcsin(np.clip(np.sqrt(np.einsum("ijk,ijk->ij", d, d)) / 2.0, 0.0, 1.0))
+
+
+def cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Row-wise cross product of ``(..., 3)`` arrays (``np.cross`` without its overhead)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out

@@ -46,7 +46,7 @@ class SolveOptions:
 
     centroid_sigma_px: float = 1.0
     match_radius_px: float | None = None
-    max_false_prob: float = 1e-6
+    max_false_prob: float = 1e-5
     max_stars: int = 12
     timeout_ms: float = 500.0
 

@@ -18,9 +18,11 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 from scipy.special import betainc
 
 from .attitude import ARCSEC_PER_RAD, wahba_svd
+from .geometry import cross
 from .camera import Camera
 from .navdb.reader import NavDatabase
 from .types import FloatArray, IntArray
@@ -86,9 +88,49 @@ class Verifier:
     db: NavDatabase
     obs: Observation
     match_radius_px: float = 4.0
-    max_false_prob: float = 1e-6
+    max_false_prob: float = 1e-5
     min_matches: int = 4
     trials: int = 0
+    screen_stars: int = 8
+
+    def screen_and_check(self, obs_idx: IntArray, cands: IntArray) -> Verified | None:
+        """Test every candidate triple ``cands`` ``(K, 3)`` for the observed triangle
+        ``obs_idx`` at once, then fully verify the promising ones, best first.
+
+        The screen fits each candidate's attitude by TRIAD (vectorised over K), predicts the
+        ICRS direction of up to ``screen_stars`` other observed stars and counts those with a
+        catalogue star within the match radius (one k-d tree query for all). Every candidate
+        counts as a trial in the coincidence bound.
+        """
+        obs_idx = np.asarray(obs_idx, dtype=np.int64)
+        cands = np.asarray(cands, dtype=np.int64).reshape(-1, 3)
+        if len(cands) == 0:
+            return None
+        self.trials += len(cands) - 1  # check() adds the last one
+        others = np.setdiff1d(np.arange(min(len(self.obs), len(obs_idx) + self.screen_stars + 3)), obs_idx)
+        others = others[: self.screen_stars]
+        if len(others) == 0:
+            order = np.arange(len(cands))
+        else:
+            hits = self._screen(obs_idx, cands, others)
+            order = np.argsort(-hits, kind="stable")
+            order = order[hits[order] >= 1]
+        for row in order[:8]:
+            found = self.check(obs_idx, cands[row])
+            if found is not None:
+                return found
+        return None
+
+    def _screen(self, obs_idx: IntArray, cands: IntArray, others: IntArray) -> IntArray:
+        stars = self.db.stars.vec
+        o = _triad_frames(self.obs.vec[obs_idx[0]][None, :], self.obs.vec[obs_idx[1]][None, :])[0]  # (3, 3)
+        c = _triad_frames(stars[cands[:, 0]], stars[cands[:, 1]])  # (K, 3, 3)
+        # v_obs = O C^T v_icrs, so v_icrs = C O^T v_obs
+        local = self.obs.vec[others] @ o  # (m, 3): O^T v
+        pred = np.einsum("kij,mj->kmi", c, local)  # (K, m, 3)
+        radius = self.match_radius_px * self.obs.pixel_scale_rad
+        dist, _ = star_tree(self.db).query(pred.reshape(-1, 3), k=1, distance_upper_bound=radius)
+        return np.isfinite(dist).reshape(len(cands), len(others)).sum(axis=1)
 
     def check(self, obs_idx: IntArray, cat_idx: IntArray, *, n_trials: int | None = None) -> Verified | None:
         """Verify a hypothesis pairing ``obs_idx`` rows with catalogue rows ``cat_idx``.
@@ -139,8 +181,8 @@ class Verifier:
         rad2 = self.match_radius_px**2
         for c, cam in enumerate(obs.cameras):
             r_cam = obs.mountings[c] @ r_body
-            cos_lim = math.cos(math.radians(cam.diagonal_fov_deg / 2 + 0.2))
-            near = np.flatnonzero(stars @ r_cam[2] > cos_lim)
+            half = math.radians(cam.diagonal_fov_deg / 2 + 0.2)
+            near = np.asarray(star_tree(self.db).query_ball_point(r_cam[2], 2 * math.sin(half / 2)), dtype=np.int64)
             pxy, inside = cam.vector_to_pixel(stars[near] @ r_cam.T)
             near, pxy = near[inside], pxy[inside]
             area += cam.width * cam.height
@@ -164,3 +206,20 @@ def residuals_arcsec(obs: Observation, db: NavDatabase, v: Verified) -> FloatArr
     pred = db.stars.vec[v.cat] @ v.matrix.T
     chord = np.linalg.norm(pred - obs.vec[v.obs], axis=1)
     return 2 * np.arcsin(np.clip(chord / 2, 0, 1)) * ARCSEC_PER_RAD
+
+
+def star_tree(db: NavDatabase) -> cKDTree:
+    """A k-d tree over the database's star vectors, built once per opened database."""
+    cache = db.__dict__.setdefault("_cache", {})
+    if "tree" not in cache:
+        cache["tree"] = cKDTree(np.asarray(db.stars.vec))
+    return cache["tree"]
+
+
+def _triad_frames(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Orthonormal frames ``(K, 3, 3)`` (columns t1, t2, t3) from vector pairs ``(K, 3)``."""
+    t1 = a / np.linalg.norm(a, axis=1, keepdims=True)
+    t2 = cross(a, b)
+    t2 /= np.linalg.norm(t2, axis=1, keepdims=True)
+    t3 = cross(t1, t2)
+    return np.stack([t1, t2, t3], axis=2)

@@ -30,12 +30,17 @@ from numpy.typing import NDArray
 
 from ..errors import InvalidInputError
 from ..types import Centroids
-from .background import TileGrid, tile_statistics
+from .background import tile_statistics
+from .blobs import find_sources
 from .measure import gather_stamps, psf_sigma_from_stamps, sharpness, windowed_centroid
 
 __all__ = ["Detections", "extract"]
 
 FloatArray = NDArray[np.float64]
+
+# A spike whose 8 neighbours average less than 2 of their own noise sigmas (sigma / sqrt(8))
+# above background has no PSF around it.
+_HOT_NOISE = 2.0 / math.sqrt(8.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,7 +96,7 @@ def extract(
     max_area_px: int = 2500,
     max_stars: int | None = 200,
     saturation: float | None = None,
-    max_sharpness: float | None = 0.85,
+    max_sharpness: float | None = 0.95,
     window_sigma_px: float | None = None,
 ) -> Detections:
     """Detect stars and measure their sub-pixel centroids.
@@ -144,58 +149,64 @@ def extract(
     det_floor = raw_floor * det_norm if det.dtype.kind == "f" else 0.5
     det_sigma = np.maximum(det_grid.sigma, det_floor)
     thr_grid = det_grid.level + np.float32(sigma_threshold) * det_sigma
-    if det.dtype.kind != "f":  # integer detection image: pixel > t  <=>  pixel > floor(t)
+    if det.dtype.kind != "f":
+        # Integer detection image: raw counts d > t <=> d > floor(t); a filtered image rounded
+        # to whole counts, round(v) > floor(t + 1/2) <=> v >= floor(t + 1/2) + 1/2 >= t.
         info = np.iinfo(det.dtype)
-        thr_grid = np.clip(np.floor(thr_grid), info.min, info.max).astype(det.dtype)
+        shift = 0.5 if det is not img else 0.0
+        thr_grid = np.clip(np.floor(thr_grid + shift), info.min, info.max).astype(det.dtype)
     mask = cv2.compare(det, det_grid.upsample(thr_grid, (height, width)), cv2.CMP_GT)
 
-    n_labels, labels = cv2.connectedComponents(mask, connectivity=8, ltype=cv2.CV_32S)
+    # 16-bit labels are faster and suffice when there are fewer mask pixels than labels.
+    ltype = cv2.CV_16U if cv2.countNonZero(mask) < 65535 else cv2.CV_32S
+    n_labels, labels = cv2.connectedComponents(mask, connectivity=8, ltype=ltype)
     if n_labels <= 1:
         return Detections.empty()
+    sat_level = _saturation_level(img, saturation)
     pts = cv2.findNonZero(mask).reshape(-1, 2)
-    blobs = _reduce_blobs(pts, labels, img, det, raw_grid, det_grid)
-
-    keep = (blobs["area"] >= min_area_px) & (blobs["area"] <= max_area_px)
+    src = find_sources(pts, labels, img, det, raw_grid, det_grid, det_sigma, saturation=sat_level)
+    cand = np.flatnonzero((src.area >= min_area_px) & (src.area <= max_area_px))
     cap = 1000 if max_stars is None else max(1000, 5 * max_stars)
-    cand = np.flatnonzero(keep)
-    cand = cand[np.argsort(-blobs["score"][cand], kind="stable")[:cap]]
+    cand = cand[np.argsort(-src.height[cand], kind="stable")[:cap]]
     if cand.size == 0:
         return Detections.empty()
-    b = {k: v[cand] for k, v in blobs.items()}
+    src = src.take(cand)
 
-    sat_level = _saturation_level(img, saturation)
-    saturated = b["raw_max"] >= sat_level if sat_level is not None else np.zeros(cand.size, bool)
-    px, py = b["peak_x"], b["peak_y"]
+    px, py = src.x, src.y
+    saturated = src.raw_max >= sat_level if sat_level is not None else np.zeros(len(src), bool)
     bkg = raw_grid.at(raw_grid.level, px, py)
     bkg_sigma = raw_grid.at(raw_sigma, px, py)
-    snr = (b["det_peak"] - det_grid.at(det_grid.level, px, py)) / det_grid.at(det_sigma, px, py)
+    snr = src.height / det_grid.at(det_sigma, px, py)
 
-    # Hot pixels: judged on a 7x7 stamp of raw pixels around the filtered peak.
+    # Hot pixels, judged on the raw pixels around the filtered peak: the 8 neighbours hold
+    # (almost) nothing, relative to the centre or within their noise.
     small, _ = gather_stamps(img, px, py, 3)
     small -= bkg[:, None, None]
-    hot = np.zeros(cand.size, bool)
+    hot = np.zeros(len(src), bool)
     if max_sharpness is not None:
-        sharp = sharpness(small)
-        hot = np.isfinite(sharp) & (sharp > max_sharpness)
+        centre, mean8 = sharpness(small)
+        hot = (centre > 0) & ((mean8 < (1.0 - max_sharpness) * centre) | (mean8 < _HOT_NOISE * bkg_sigma))
     star = ~hot
     sigma_w = window_sigma_px if window_sigma_px is not None else _estimate_window_sigma(
         small[star & ~saturated], snr[star & ~saturated], filter_sigma_px)
 
+    # Centroids: windowed for unsaturated stars, blob centre of light for saturated ones.
     radius = max(3, int(math.ceil(4.0 * sigma_w)))
-    extent = np.maximum(b["x_max"] - b["x_min"], b["y_max"] - b["y_min"]) + 1
-    compact = star & ~saturated & (extent <= 2 * radius - 1)
-    xy = np.stack([b["cog_x"], b["cog_y"]], axis=1)
-    flux = b["mask_flux"].copy()
-    if compact.any():
-        idx = np.flatnonzero(compact)
+    xy = np.stack([src.cog_x, src.cog_y], axis=1)
+    flux = src.mask_flux.copy()
+    windowed = star & ~saturated
+    if windowed.any():
+        idx = np.flatnonzero(windowed)
         stamps, valid = gather_stamps(img, px[idx], py[idx], radius)
         stamps -= bkg[idx, None, None]
         stamps[~valid] = 0.0
-        x0, y0 = b["cog_x"][idx] - px[idx], b["cog_y"][idx] - py[idx]
-        xw, yw, ok = windowed_centroid(stamps, valid, x0, y0, window_sigma_px=sigma_w)
-        xy[idx[ok], 0] = px[idx[ok]] + xw[ok]
-        xy[idx[ok], 1] = py[idx[ok]] + yw[ok]
-        flux[idx] = stamps.sum(axis=(1, 2))
+        single = src.n_peaks[idx] == 1
+        x0 = np.where(single, src.cog_x[idx] - px[idx], 0.0)
+        y0 = np.where(single, src.cog_y[idx] - py[idx], 0.0)
+        xw, yw, fw, ok = windowed_centroid(stamps, valid, x0, y0, window_sigma_px=sigma_w)
+        xy[idx, 0] = px[idx] + np.where(ok, xw, x0)
+        xy[idx, 1] = py[idx] + np.where(ok, yw, y0)
+        flux[idx] = fw
 
     sel = np.flatnonzero(star)
     sel = sel[np.argsort(-flux[sel], kind="stable")]
@@ -204,8 +215,8 @@ def extract(
     return Detections(
         centroids=Centroids(np.ascontiguousarray(xy[sel]), flux[sel].astype(np.float64)),
         saturated=saturated[sel],
-        area_px=b["area"][sel].astype(np.int64),
-        peak=(b["raw_max"][sel] - bkg[sel]).astype(np.float64),
+        area_px=src.area[sel].astype(np.int64),
+        peak=(src.raw_max[sel] - bkg[sel]).astype(np.float64),
         snr=snr[sel].astype(np.float64),
         background=bkg[sel].astype(np.float64),
         background_sigma=bkg_sigma[sel].astype(np.float64),
@@ -276,44 +287,6 @@ def _detection_image(img: NDArray[np.generic], filter_sigma_px: float | None,
         return cv2.GaussianBlur(img, (ksize, ksize), filter_sigma_px, borderType=cv2.BORDER_REFLECT), norm
     src = img if img.dtype == np.float32 else img.astype(np.float32)
     return cv2.GaussianBlur(src, (ksize, ksize), filter_sigma_px, borderType=cv2.BORDER_REFLECT), norm
-
-
-def _reduce_blobs(pts: NDArray[np.int32], labels: NDArray[np.int32], img: NDArray[np.generic],
-                  det: NDArray[np.generic], raw_grid: TileGrid, det_grid: TileGrid) -> dict[str, NDArray]:
-    """Per-blob statistics reduced over the mask pixels (sorted by label)."""
-    xs, ys = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
-    lab = labels[ys, xs]
-    order = np.argsort(lab, kind="stable")
-    xs, ys, lab = xs[order], ys[order], lab[order]
-    starts = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]])
-    area = np.diff(np.r_[starts, lab.size])
-    det_v = det[ys, xs].astype(np.float64) - det_grid.at(det_grid.level, xs, ys)
-    raw_v = img[ys, xs].astype(np.float64)
-    resid = raw_v - raw_grid.at(raw_grid.level, xs, ys)
-    # peak of the filtered image per blob: the last element after sorting by (label, value)
-    by_val = np.lexsort((det_v, lab))
-    last = np.r_[starts[1:], lab.size] - 1
-    peak_i = by_val[last]
-    w = np.clip(resid, 0.0, None)
-    wsum = np.add.reduceat(w, starts)
-    safe = np.where(wsum > 0, wsum, 1.0)
-    cog_x = np.where(wsum > 0, np.add.reduceat(w * xs, starts) / safe, xs[peak_i])
-    cog_y = np.where(wsum > 0, np.add.reduceat(w * ys, starts) / safe, ys[peak_i])
-    return {
-        "area": area,
-        "score": np.add.reduceat(det_v, starts),
-        "peak_x": xs[peak_i],
-        "peak_y": ys[peak_i],
-        "det_peak": det[ys[peak_i], xs[peak_i]].astype(np.float64),
-        "raw_max": np.maximum.reduceat(raw_v, starts),
-        "mask_flux": np.add.reduceat(resid, starts),
-        "cog_x": cog_x.astype(np.float64),
-        "cog_y": cog_y.astype(np.float64),
-        "x_min": np.minimum.reduceat(xs, starts),
-        "x_max": np.maximum.reduceat(xs, starts),
-        "y_min": np.minimum.reduceat(ys, starts),
-        "y_max": np.maximum.reduceat(ys, starts),
-    }
 
 
 def _saturation_level(img: NDArray[np.generic], saturation: float | None) -> float | None:

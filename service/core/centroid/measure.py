@@ -42,17 +42,16 @@ def gather_stamps(
     return values, valid
 
 
-def sharpness(stamps: FloatArray) -> FloatArray:
-    """``1 - mean(8 neighbours) / centre`` of background-subtracted stamps.
+def sharpness(stamps: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Centre pixel and mean of its 8 neighbours of background-subtracted stamps.
 
-    About 0.5 for a star with a 1 px Gaussian PSF, 0.85 for a 0.5 px PSF, and close to 1 for a
-    hot pixel (a spike with no PSF around it). Not finite where the centre is <= 0.
+    ``1 - mean8 / centre`` is about 0.5 for a star with a 1 px Gaussian PSF, 0.85 for a
+    0.5 px PSF, and close to 1 for a hot pixel (a spike with no PSF around it).
     """
     r = stamps.shape[1] // 2
     centre = stamps[:, r, r]
     ring = stamps[:, r - 1 : r + 2, r - 1 : r + 2].sum(axis=(1, 2)) - centre
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.asarray(1.0 - (ring / 8.0) / centre)
+    return np.asarray(centre), np.asarray(ring / 8.0)
 
 
 @lru_cache(maxsize=4)
@@ -89,7 +88,7 @@ def windowed_centroid(
     window_sigma_px: float,
     max_iter: int = 15,
     tol_px: float = 1e-4,
-) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
     """Gaussian-windowed centroid (as SExtractor's ``XWIN``), iterated to its fixed point.
 
     Each step moves the position by twice the Gaussian-weighted mean offset,
@@ -112,6 +111,9 @@ def windowed_centroid(
     -------
     x, y : (N,) float64
         Positions relative to the stamp centre (px).
+    flux : (N,) float64
+        Windowed flux ``2 sum(w I)`` at the final position: the total flux of a Gaussian star
+        whose sigma equals the window's, with the noise of an aperture of ~``4 pi sigma^2`` px.
     ok : (N,) bool
         False where the weighted flux vanished or the position left the central region; the
         caller should keep its start value there.
@@ -144,4 +146,8 @@ def windowed_centroid(
         active[idx] = ~bad & (np.maximum(np.abs(step_x), np.abs(step_y)) > tol_px)
     limit = max(1.5, 0.5 * r)
     ok = (total > 0) & (np.abs(x - x0) <= limit) & (np.abs(y - y0) <= limit) & np.isfinite(x) & np.isfinite(y)
-    return x, y, ok
+    xe, ye = np.where(ok, x, x0), np.where(ok, y, y0)
+    wx = np.exp(-((off[None, :] - xe[:, None]) ** 2) * inv2s2)
+    wy = np.exp(-((off[None, :] - ye[:, None]) ** 2) * inv2s2)
+    flux = 2.0 * np.einsum("nij,ni,nj->n", data, wy, wx)
+    return x, y, flux, ok

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry import chord_from_angle
+from ..geometry import chord_from_angle, cross
 from ..types import FloatArray
 
 
@@ -84,5 +84,5 @@ def same_handedness(vec: np.ndarray, tri_obs: np.ndarray, cand: np.ndarray) -> n
     observed triangle's; a mirror image is never a match."""
     s_obs = np.sign(np.linalg.det(tri_obs))
     va, vb, vc = vec[cand[:, 0]], vec[cand[:, 1]], vec[cand[:, 2]]
-    s = np.einsum("ij,ij->i", va, np.cross(vb, vc))
+    s = np.einsum("ij,ij->i", va, cross(vb, vc))
     return np.sign(s) == s_obs

@@ -6,7 +6,9 @@ side, in [60, 180) degrees. The catalogue keeps every triangle of stars whose si
 ``(xi, d_max]`` as ``(ID_max, ID_sec, ID_thi, b, c, theta_max)``, sorted by ``theta_max`` and
 cut into ``n_blocks`` blocks ``H(theta) = floor(N (theta - 60) / 120)``; a query reads the
 blocks covering ``theta_obs +- tol_theta`` and keeps records with ``|b - b_obs| <= eps`` and
-``|c - c_obs| <= eps``.
+``|c - c_obs| <= eps``. Inside each block the records are sorted by ``b`` (the composite key
+``H + b / b_scale``), so a query reads only the ``b +- eps`` slice of each block instead of the
+whole block: the paper's hash, with a secondary sort that makes a query ~100x cheaper.
 
 Where the paper is vague we chose:
 - ``d_max`` is the field side (the paper's faster "side" library); triangles whose sides do not
@@ -106,20 +108,20 @@ class MaxAngle:
             recs.append(np.column_stack([ids[keep].astype(np.float64), sides[keep, 1], sides[keep, 2],
                                          theta[keep]]))
         allrec = np.concatenate(recs) if recs else np.zeros((0, 6))
-        allrec = allrec[np.argsort(allrec[:, 5], kind="stable")]
-        theta = allrec[:, 5].astype(np.float32)
-        edges = THETA_LO + THETA_SPAN * np.arange(n_blocks + 1) / n_blocks
-        block_start = np.searchsorted(theta, edges.astype(np.float32), side="left").astype(np.int64)
-        block_start[-1] = len(theta)
-        progress(f"{len(theta)} triangles", 1.0)
+        b_scale = math.radians(d_max_deg) * 1.001
+        block = np.clip((n_blocks * (allrec[:, 5] - THETA_LO) / THETA_SPAN).astype(np.int64), 0, n_blocks - 1)
+        key = block + allrec[:, 3] / b_scale
+        order = np.argsort(key, kind="stable")
+        allrec, key = allrec[order], key[order]
+        progress(f"{len(key)} triangles", 1.0)
         tables = {
             "ids": allrec[:, :3].astype(np.int32),
-            "b": allrec[:, 3].astype(np.float32),
+            "key": key,
             "c": allrec[:, 4].astype(np.float32),
-            "theta": theta,
-            "block_start": block_start,
+            "theta": allrec[:, 5].astype(np.float32),
         }
-        meta = {"d_max_deg": d_max_deg, "xi_deg": xi_deg, "n_blocks": n_blocks, "n_triangles": int(len(theta))}
+        meta = {"d_max_deg": d_max_deg, "xi_deg": xi_deg, "n_blocks": n_blocks, "b_scale": b_scale,
+                "n_triangles": int(len(key))}
         return tables, meta
 
     def matcher(self, db: NavDatabase) -> MaxAngleMatcher:
@@ -130,9 +132,9 @@ class MaxAngleMatcher:
     def __init__(self, db: NavDatabase) -> None:
         t = db.tables["maxangle"]
         prm = db.method_params("maxangle")
-        self.ids, self.b, self.c, self.theta = t["ids"], t["b"], t["c"], t["theta"]
-        self.block_start = t["block_start"]
+        self.ids, self.key, self.c, self.theta = t["ids"], t["key"], t["c"], t["theta"]
         self.n_blocks = int(prm["n_blocks"])
+        self.b_scale = float(prm["b_scale"])
         self.d_max = math.radians(prm["d_max_deg"])
         self.xi = math.radians(prm["xi_deg"])
         self.vec = db.stars.vec
@@ -149,11 +151,16 @@ class MaxAngleMatcher:
         db_ = abs(c - b * math.cos(theta)) / (b * c * s)
         dc = abs(b - c * math.cos(theta)) / (b * c * s)
         tol_t = eps * (da + db_ + dc)
-        lo = self.block_start[self._block(theta - tol_t)]
-        hi = self.block_start[self._block(theta + tol_t) + 1]
-        tb, tc, tt = self.b[lo:hi], self.c[lo:hi], self.theta[lo:hi]
-        ok = (np.abs(tb - b) <= eps) & (np.abs(tc - c) <= eps) & (np.abs(tt - theta) <= tol_t)
-        return lo + np.flatnonzero(ok)
+        blocks = np.arange(self._block(theta - tol_t), self._block(theta + tol_t) + 1)
+        starts = np.searchsorted(self.key, blocks + (b - eps) / self.b_scale, side="left")
+        ends = np.searchsorted(self.key, blocks + (b + eps) / self.b_scale, side="right")
+        counts = ends - starts
+        total = int(counts.sum())
+        if total == 0:
+            return np.zeros(0, np.int64)
+        rows = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(total)
+        ok = (np.abs(self.c[rows] - c) <= eps) & (np.abs(self.theta[rows] - theta) <= tol_t)
+        return rows[ok]
 
     def identify(self, ctx: SolveContext) -> Verified | None:
         obs = ctx.obs
@@ -187,8 +194,7 @@ class MaxAngleMatcher:
                 cand = cand[same_handedness(self.vec, v[lab], cand)]
                 if len(cand) > MAX_CANDIDATES:
                     continue
-                for tri in cand:
-                    found = ctx.verifier.check(lab.astype(np.int64), tri)
-                    if found is not None:
-                        return found
+                found = ctx.verifier.screen_and_check(lab.astype(np.int64), cand)
+                if found is not None:
+                    return found
         return None

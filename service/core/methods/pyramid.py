@@ -83,8 +83,7 @@ class PyramidMatcher:
             cand = cand[same_handedness(self.vec, v[[i, j, k]], cand)]
             if len(cand) == 0 or len(cand) > MAX_CANDIDATES:
                 continue
-            for tri in cand:
-                found = ctx.verifier.check(np.array([i, j, k]), tri)
-                if found is not None:
-                    return found
+            found = ctx.verifier.screen_and_check(np.array([i, j, k]), cand)
+            if found is not None:
+                return found
         return None

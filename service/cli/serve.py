@@ -1,0 +1,78 @@
+"""``skyfix serve``: run the API under uvicorn (``--workers N`` share one memory-mapped database).
+
+Options override the ``SKYFIX_*`` environment; the result is written back into the
+environment so that every worker process (uvicorn spawns them and calls the app factory,
+``service.api.app:create_app``) reads the same settings. The API key is taken from
+``SKYFIX_API_KEY`` only, never from the command line (where ``ps`` would show it).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from pydantic import ValidationError
+
+APP_FACTORY = "service.api.app:create_app"
+
+
+def serve(
+    host: Annotated[str | None, typer.Option(help="Interface to bind (env SKYFIX_HOST; default 127.0.0.1). "
+                                             "Anything but loopback requires SKYFIX_API_KEY.")] = None,
+    port: Annotated[int | None, typer.Option(help="TCP port (env SKYFIX_PORT; default 8000).")] = None,
+    workers: Annotated[int | None, typer.Option(help="Worker processes (env SKYFIX_WORKERS; default 1).")] = None,
+    db: Annotated[Path | None, typer.Option(help="Navigation database directory (env SKYFIX_DB_PATH; "
+                                            "default: the default database, built on first use).")] = None,
+    log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
+) -> None:
+    """Serve the REST and WebSocket API."""
+    import uvicorn
+
+    from ..api.settings import Settings
+    from ..core.errors import DatabaseError
+    from ..core.navdb import open_database
+
+    overrides = {k: v for k, v in {"host": host, "port": port, "workers": workers, "db_path": db}.items()
+                 if v is not None}
+    try:
+        settings = Settings(**overrides)  # type: ignore[arg-type]
+    except ValidationError as exc:
+        typer.echo(f"skyfix serve: {_first_error(exc)}", err=True)
+        raise typer.Exit(2) from None
+    path = settings.db_path or _default_database()
+    try:
+        open_database(path)
+    except DatabaseError as exc:
+        typer.echo(f"skyfix serve: {exc}", err=True)
+        raise typer.Exit(2) from None
+    os.environ.update({"SKYFIX_HOST": settings.host, "SKYFIX_PORT": str(settings.port),
+                       "SKYFIX_WORKERS": str(settings.workers), "SKYFIX_DB_PATH": str(path)})
+    uvicorn.run(APP_FACTORY, factory=True, host=settings.host, port=settings.port, workers=settings.workers,
+                ws_max_size=settings.ws_max_message_bytes + 1024, log_level=log_level, server_header=False,
+                timeout_graceful_shutdown=10)
+
+
+def _default_database() -> Path:
+    """Build the default database once, here, before any worker starts (with a progress bar)."""
+    from rich.progress import Progress
+
+    from ..core.navdb import default_database_dir, ensure_default_database
+
+    if (default_database_dir() / "default" / "manifest.json").is_file():
+        return ensure_default_database(build=False)
+    with Progress(transient=True) as bar:
+        task = bar.add_task("building the default navigation database", total=1.0)
+        return ensure_default_database(progress=lambda stage, frac: bar.update(
+            task, completed=frac, description=stage[:60]))
+
+
+def _first_error(exc: ValidationError) -> str:
+    err = exc.errors()[0]
+    where = ".".join(str(p) for p in err["loc"])
+    return f"{where}: {err['msg']}" if where else str(err["msg"]).removeprefix("Value error, ")
+
+
+if __name__ == "__main__":
+    typer.run(serve)

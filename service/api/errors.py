@@ -104,7 +104,7 @@ async def _handle(request: Request, exc: Exception) -> JSONResponse:
 
 async def _handle_http(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, StarletteHTTPException)
-    field = "body" if exc.status_code == 413 else None
+    field = "body" if exc.status_code in (400, 413) else None  # 400: multipart parse errors
     return _response(exc.status_code, str(exc.detail), field, exc.headers)
 
 

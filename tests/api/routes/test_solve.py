@@ -1,0 +1,122 @@
+"""POST /v1/solve and /v1/solve/image against a live server, scored against simulator truth."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import cv2
+import httpx
+import numpy as np
+import pytest
+
+from client.models import SolveResult
+from service.core.attitude import quat_multiply
+from service.core.camera import Camera
+from service.core.render import render_image
+from service.core.sim import SimConfig, SimFrame, random_points, simulate_frame
+
+from ..conftest import CAMERA_SPEC, REAL, angle_deg, check_hips, real_stars, rows
+
+
+def solvable(frames: list[SimFrame], n: int) -> list[SimFrame]:
+    return [f for f in frames if real_stars(f) >= 8][:n]
+
+
+def test_solve_simulated_frames(client: httpx.Client, frames: list[SimFrame]) -> None:
+    for i, frame in enumerate(solvable(frames, 15)):
+        r = client.post("/v1/solve", json={"id": f"f{i}", "camera": "tetra3", "centroids": rows(frame)})
+        assert r.status_code == 200, r.text
+        result = r.json()
+        SolveResult.model_validate(result)
+        assert result["id"] == f"f{i}"
+        assert result["status"] == "solved"
+        assert angle_deg(result["quaternion"], frame.quaternion) < 0.02
+        check_hips(result, frame)
+        assert set(result["timings_ms"]) >= {"identify", "total"}
+
+
+@pytest.mark.parametrize("method", ["pyramid", "maxangle", "auto"])
+def test_each_method_with_an_inline_camera(client: httpx.Client, frames: list[SimFrame], method: str) -> None:
+    frame = solvable(frames, 1)[0]
+    r = client.post("/v1/solve", json={"camera": CAMERA_SPEC, "centroids": rows(frame), "method": method})
+    result = r.json()
+    assert r.status_code == 200 and result["status"] == "solved", r.text
+    assert result["method"] == method or method == "auto"
+    assert result["id"] is None
+    check_hips(result, frame)
+
+
+def test_attitude_hint_accepts_near_and_refuses_far(client: httpx.Client, frames: list[SimFrame]) -> None:
+    frame = solvable(frames, 2)[1]
+    body: dict[str, Any] = {"camera": "tetra3", "centroids": rows(frame)}
+    near = client.post("/v1/solve", json={**body, "attitude_hint": {"quaternion": frame.quaternion.tolist(),
+                                                                     "radius_deg": 1.0}})
+    assert near.json()["status"] == "solved"
+    turned = quat_multiply(np.array([0.0, 1.0, 0.0, 0.0]), frame.quaternion)  # boresight flipped
+    far = client.post("/v1/solve", json={**body, "attitude_hint": {"quaternion": turned.tolist(),
+                                                                    "radius_deg": 5.0}})
+    assert far.status_code == 200 and far.json()["status"] == "no_solution"
+
+
+def test_rig_of_two_named_cameras(client: httpx.Client, frames: list[SimFrame], camera: Camera) -> None:
+    body_q = solvable(frames, 3)[2].quaternion
+    mount = np.array([0.7071067811865476, 0.7071067811865476, 0.0, 0.0])  # "side" in conftest
+    config = SimConfig(mag_limit=6.0, centroid_noise_px=0.2, max_stars=12, epoch=2026.0)
+    rng = np.random.default_rng(7)
+    a = simulate_frame(camera, body_q, config, rng)
+    b = simulate_frame(camera, quat_multiply(mount, body_q), config, rng)
+    r = client.post("/v1/solve", json={"id": 1, "cameras": [{"camera": "tetra3", "centroids": rows(a)},
+                                                            {"camera": "side", "centroids": rows(b)}]})
+    result = r.json()
+    assert r.status_code == 200 and result["status"] == "solved", r.text
+    assert angle_deg(result["quaternion"], body_q) < 0.02
+    for star in result["stars"]:
+        truth = (a, b)[star["camera"]]
+        assert star["hip"] == int(truth.hip[star["centroid"]])
+
+
+def test_random_points_are_no_solution(client: httpx.Client, camera: Camera) -> None:
+    pts = random_points(camera, 15, rng=3)
+    r = client.post("/v1/solve", json={"camera": "tetra3", "centroids": pts.xy.tolist()})
+    result = r.json()
+    assert r.status_code == 200 and result["status"] == "no_solution"
+    assert result["quaternion"] is None and result["stars"] == []
+
+
+def png_of(frame: SimFrame) -> bytes:
+    img = render_image(frame.centroids.xy, frame.centroids.flux * 20, width=1024, height=768, rng=5)
+    ok, buf = cv2.imencode(".png", img)
+    assert ok
+    return buf.tobytes()
+
+
+def test_image_upload_of_a_rendered_frame(client: httpx.Client, frames: list[SimFrame]) -> None:
+    frame = solvable(frames, 4)[3]
+    files = {"image": ("frame.png", png_of(frame), "image/png")}
+    r = client.post("/v1/solve/image", files=files, data={"camera": "tetra3", "id": "img-1"})
+    result = r.json()
+    assert r.status_code == 200 and result["status"] == "solved", r.text
+    assert result["id"] == "img-1"
+    assert angle_deg(result["quaternion"], frame.quaternion) < 0.05
+    r2 = client.post("/v1/solve/image", files=files, data={"camera": json.dumps(CAMERA_SPEC), "method": "pyramid"})
+    assert r2.json()["status"] == "solved", r2.text
+
+
+REAL_TIFF = "tetra3/2019-07-29T204726_Alt40_Azi-135_Try1.tiff"
+
+
+def test_real_tetra3_tiff(client: httpx.Client) -> None:
+    path = REAL / REAL_TIFF
+    if not path.is_file():
+        pytest.skip(f"real test images absent ({path})")
+    truth = json.loads((REAL / "truth.json").read_text())["images"][REAL_TIFF]
+    expected = {m["hip"] for m in json.loads((REAL / "matches.json").read_text())["images"][REAL_TIFF]["matches"]}
+    r = client.post("/v1/solve/image", files={"image": (path.name, path.read_bytes(), "image/tiff")},
+                    data={"fov_deg": "11.4"})
+    result = r.json()
+    assert r.status_code == 200 and result["status"] == "solved", r.text
+    assert angle_deg(result["quaternion"], truth["quaternion_icrs_to_camera_wxyz"]) < 0.1
+    found = {s["hip"] for s in result["stars"]}
+    assert len(found & expected) >= 8
+    assert len(found - expected) <= len(found) // 4  # the reference list is conservative, not complete

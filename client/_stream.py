@@ -18,6 +18,7 @@ string form (``3`` and ``"3"`` are the same frame); frames without an id get a s
 from __future__ import annotations
 
 import asyncio
+import inspect
 import json
 import os
 import time
@@ -53,6 +54,9 @@ _DELIVERED_MEMORY = 65_536  # ids remembered for de-duplication
 # Close codes after which reconnecting cannot help: the server refused us or our data.
 _FATAL_CLOSE = {1002, 1003, 1007, 1008, 1009, 1010}
 _CONNECT_ERRORS = (OSError, TimeoutError, InvalidHandshake, InvalidURI)
+
+# websockets >= 17.1 wants ``legacy=True`` for a sync connection managed outside a ``with`` block.
+_SYNC_LEGACY = {"legacy": True} if "legacy" in inspect.signature(sync_connect).parameters else {}
 
 FrameLike = SolveRequest | Mapping[str, Any]
 ImageLike = bytes | str | os.PathLike[str]
@@ -292,7 +296,7 @@ class Stream(_StreamBase):
         failures = 0
         while True:
             try:
-                self._ws = sync_connect(self.url, **self._connect_kwargs())
+                self._ws = sync_connect(self.url, **_SYNC_LEGACY, **self._connect_kwargs())
                 self._gen += 1
                 self._state.inflight[self._gen] = deque()
                 return self

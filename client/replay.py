@@ -254,13 +254,13 @@ async def replay_frames(
     bars = bars or WrongBars()
     run = _Run(frames, bars, on_result, rate_hz)
     wire_ids = _wire_ids(frames)
+    source = Path(recording) if recording else None
     try:
         if ws:
-            reconnects = await _replay_ws(run, wire_ids, Path(recording) if recording else None, url=url,
-                                          api_key=api_key, timeout=timeout, retries=retries, method=method,
-                                          concurrency=concurrency)
+            reconnects = await _replay_ws(run, wire_ids, source, url=url, api_key=api_key, timeout=timeout,
+                                          retries=retries, method=method, concurrency=concurrency)
         else:
-            reconnects = await _replay_rest(run, wire_ids, Path(recording) if recording else None, url=url, api_key=api_key, timeout=timeout,
+            reconnects = await _replay_rest(run, wire_ids, source, url=url, api_key=api_key, timeout=timeout,
                                             retries=retries, method=method, concurrency=concurrency,
                                             transport=transport)
     finally:

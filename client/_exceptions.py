@@ -67,6 +67,9 @@ class SkyfixHTTPError(SkyfixClientError):
     def __repr__(self) -> str:
         return f"{type(self).__name__}(status={self.status!r}, detail={self.detail!r}, field={self.field!r})"
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (self.status, self.detail, self.field))
+
 
 class SkyfixFrameError(SkyfixClientError):
     """The server refused one frame sent over the stream; the stream itself stays usable.
@@ -89,6 +92,9 @@ class SkyfixFrameError(SkyfixClientError):
             f"field={self.field!r}, status={self.status!r})"
         )
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (self.frame_id, self.detail, self.field, self.status))
+
 
 class SkyfixStreamError(SkyfixClientError):
     """The WebSocket stream failed and could not be resumed (or was refused outright).
@@ -99,6 +105,9 @@ class SkyfixStreamError(SkyfixClientError):
     def __init__(self, message: str, unacknowledged: list[Any] | None = None) -> None:
         self.unacknowledged = list(unacknowledged or [])
         super().__init__(message)
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (self.args[0], self.unacknowledged))
 
 
 class SkyfixProtocolError(SkyfixClientError):
@@ -115,4 +124,12 @@ class RecordingError(SkyfixClientError, ValueError):
         self.path = path
         self.line = line
         where = f"{path}:{line}: " if path and line else (f"{path}: " if path else "")
+        self.message = message
         super().__init__(f"{where}{message}")
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (_rebuild_recording_error, (self.message, self.path, self.line))
+
+
+def _rebuild_recording_error(message: str, path: str | None, line: int | None) -> RecordingError:
+    return RecordingError(message, path=path, line=line)

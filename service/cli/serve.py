@@ -50,7 +50,8 @@ def serve(
     os.environ.update({"SKYFIX_HOST": settings.host, "SKYFIX_PORT": str(settings.port),
                        "SKYFIX_WORKERS": str(settings.workers), "SKYFIX_DB_PATH": str(path)})
     uvicorn.run(APP_FACTORY, factory=True, host=settings.host, port=settings.port, workers=settings.workers,
-                ws_max_size=settings.ws_max_message_bytes + 1024, log_level=log_level, server_header=False,
+                ws_max_size=settings.ws_max_message_bytes + 1024, ws_per_message_deflate=False,
+                log_level=log_level, server_header=False,
                 timeout_graceful_shutdown=10)
 
 

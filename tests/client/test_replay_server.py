@@ -211,3 +211,33 @@ def test_ws_replay_resumes_after_a_restart(own_server: ServerProcess, sim_record
     assert report.failed == 0 and report.frames == 40
     assert sorted(f.id for f in report.per_frame) == sorted(f.id for f in frames)
     assert report.identification_rate >= 0.95
+
+
+def test_rig_replay_scores_the_body_attitude(server: ServerProcess, tmp_path: Path) -> None:
+    """Two cameras on one body, 90° apart: truth is the body attitude and the HIPs of both
+    cameras' centroids, one camera after the other."""
+    from service.core.attitude import random_rotations
+    from service.core.camera import Camera
+    from service.core.sim import SimConfig, simulate_frame
+
+    from client._attitude import quat_mul
+
+    camera = Camera.from_fov(12.0, 1024, 768)
+    mounts = [(1.0, 0.0, 0.0, 0.0), (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)]  # body -> camera
+    config = SimConfig(centroid_noise_px=0.1, max_stars=15)
+    rng = np.random.default_rng(5)
+    path = tmp_path / "rig.jsonl"
+    with RecordingWriter(path) as rec:
+        for i, q_body in enumerate(random_rotations(8, rng)):
+            cams, hips = [], []
+            for mount in mounts:
+                sim = simulate_frame(camera, np.array(quat_mul(mount, q_body)), config, rng)
+                cams.append({"camera": {**camera.to_spec(), "mounting_quaternion": list(mount)},
+                             "centroids": np.column_stack([sim.centroids.xy, sim.centroids.flux]).tolist()})
+                hips += [None if h < 0 else int(h) for h in sim.hip]
+            rec.write({"id": i, "cameras": cams, "truth": {"quaternion": [float(c) for c in q_body], "hip": hips}})
+    report = replay(path, url=server.url, concurrency=2)
+    check_against_truth(report, path)
+    assert report.solved >= 7 and report.wrong == 0 and report.hip_wrong == 0
+    assert report.cross_boresight_arcsec.max is not None and report.cross_boresight_arcsec.max < 30
+    assert report.hip_checked > 15 * report.solved  # stars of both cameras were checked

@@ -86,6 +86,9 @@ def _check_frame(frame: RecordedFrame, base: Path, where: str, line: int) -> Non
         raise RecordingError("a frame needs exactly one of centroids, image or cameras", path=where, line=line)
     if frame.cameras is None and frame.camera is None and frame.image is None:
         raise RecordingError("a centroid frame needs a camera", path=where, line=line)
+    rows = list(frame.centroids or []) + [r for cam in frame.cameras or [] for r in cam.centroids]
+    if any(len(r) not in (2, 3) for r in rows):
+        raise RecordingError("centroid rows are [x, y] or [x, y, flux]", path=where, line=line)
     if frame.image is not None:
         _resolve_under(base, frame.image, where, line)
     if frame.truth is not None and frame.truth.quaternion is not None:

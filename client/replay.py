@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import pydantic
 
 from ._aem import AemRecord
 from ._client import AsyncClient, ws_url
@@ -118,6 +119,10 @@ class _Run:
 
 
 def _describe(exc: BaseException) -> str:
+    if isinstance(exc, pydantic.ValidationError):
+        err = exc.errors()[0]
+        loc = ".".join(str(p) for p in err.get("loc", ()))
+        return f"invalid frame: {loc + ': ' if loc else ''}{err['msg']}"
     if isinstance(exc, SkyfixHTTPError):
         return f"HTTP {exc.status}: {exc.detail}" + (f" (field {exc.field})" if exc.field else "")
     return f"{type(exc).__name__}: {exc}"
@@ -139,7 +144,7 @@ async def _replay_rest(run: _Run, wire_ids: list[FrameId], recording: Path | Non
                 result = await client.solve_image(path, camera=frame.camera, id=wire_ids[index], method=method)
             else:
                 result = await client.solve(_request(frame, wire_ids[index], method))
-        except (SkyfixClientError, OSError) as exc:
+        except (SkyfixClientError, OSError, ValueError) as exc:  # ValueError: a frame the API refuses
             run.failed(index, _describe(exc), time.perf_counter() - t0)
         else:
             run.done(index, result, time.perf_counter() - t0)
@@ -168,10 +173,19 @@ async def _replay_ws(run: _Run, wire_ids: list[FrameId], recording: Path | None,
     image_camera = next((f.camera for f in run.frames if f.image is not None), None)
     stream = AsyncStream(ws_url(url), api_key=api_key, timeout=timeout, retries=retries, method=method,
                          camera=image_camera)
-    unsendable = {i for i, f in enumerate(run.frames)
-                  if f.image is not None and (recording is None or f.camera != image_camera)}
-    for index in unsendable:
-        run.failed(index, "over --ws, image frames must share one camera (the first image's)")
+    requests: dict[int, SolveRequest] = {}
+    unsendable: set[int] = set()
+    for index, frame in enumerate(run.frames):
+        if frame.image is not None:
+            if recording is None or frame.camera != image_camera:
+                run.failed(index, "over --ws, image frames must share one camera (the first image's)")
+                unsendable.add(index)
+            continue
+        try:
+            requests[index] = _request(frame, wire_ids[index], method)
+        except ValueError as exc:
+            run.failed(index, _describe(exc))
+            unsendable.add(index)
 
     async def sender() -> None:
         for index, frame in enumerate(run.frames):
@@ -185,7 +199,7 @@ async def _replay_ws(run: _Run, wire_ids: list[FrameId], recording: Path | None,
                 assert recording is not None
                 await stream.send_image(resolve_image(recording, frame.image), id=wire_ids[index])
             else:
-                await stream.send(_request(frame, wire_ids[index], method))
+                await stream.send(requests[index])
 
     async def receiver() -> None:
         received = 0

@@ -77,6 +77,7 @@ def test_writer_refuses_escaping_image(tmp_path: Path) -> None:
     ('{"id": 1}', "exactly one of"),
     ('{"id": 1, "centroids": [[1, 2]]}', "needs a camera"),
     ('{"id": 1, "camera": {"width": 10, "height": 10}, "centroids": [[1, 2]]}', "exactly one of fov_deg"),
+    ('{"id": 1, "camera": %s, "centroids": [[1, 2, 3, 4]]}' % str(CAM).replace("'", '"'), "rows"),
     ('{"id": 1, "camera": %s, "centroids": [[1, 2]], "truth": {"quaternion": [2, 0, 0, 0]}}'
      % str(CAM).replace("'", '"'), "unit"),
 ])

@@ -241,3 +241,35 @@ def test_rig_replay_scores_the_body_attitude(server: ServerProcess, tmp_path: Pa
     assert report.solved >= 7 and report.wrong == 0 and report.hip_wrong == 0
     assert report.cross_boresight_arcsec.max is not None and report.cross_boresight_arcsec.max < 30
     assert report.hip_checked > 15 * report.solved  # stars of both cameras were checked
+
+
+@pytest.fixture(scope="module")
+def image_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Four real 16-bit TIFFs (tetra3), copied in beside the recording, with reference attitudes."""
+    from .conftest import REAL
+
+    if not (REAL / "truth.json").is_file():
+        pytest.skip(f"real images not found in {REAL}")
+    truth = json.loads((REAL / "truth.json").read_text())["images"]
+    names = sorted(n for n in truth if n.startswith("tetra3/"))[:4]
+    path = tmp_path_factory.mktemp("images") / "images.jsonl"
+    with RecordingWriter(path) as rec:
+        for i, name in enumerate(names):
+            rel = rec.add_image(REAL / name)
+            rec.write({"id": Path(name).stem, "time": f"2019-07-29T20:47:{26 + i:02d}Z", "image": rel,
+                       "camera": {"width": 1024, "height": 768, "fov_deg": 11.425},
+                       "truth": {"quaternion": truth[name]["quaternion_icrs_to_camera_wxyz"]}})
+    return path
+
+
+@pytest.mark.parametrize("ws", [False, True], ids=["rest", "ws"])
+def test_replay_of_real_images(server: ServerProcess, image_recording: Path, ws: bool) -> None:
+    import service.core.pipeline as pipeline
+
+    if not hasattr(pipeline, "solve_image"):
+        pytest.skip("the engine has no image pipeline yet")
+    report = replay(image_recording, url=server.url, ws=ws, concurrency=2)
+    check_against_truth(report, image_recording)
+    assert report.failed == 0, report.failures
+    assert report.solved >= 3 and report.wrong == 0
+    assert report.cross_boresight_arcsec.max is not None and report.cross_boresight_arcsec.max < 60

@@ -5,7 +5,7 @@ runs alone as ``python -m client.cli RECORDING --url ...``.
 
 Exit status: 0 = done and every bar given was met; 1 = a ``--min-rate`` or ``--max-wrong``
 bar was missed; 2 = bad usage or an unreadable recording; 3 = no frame was answered at all
-(server unreachable or refusing every frame).
+(server unreachable or refusing every frame); 130 = interrupted (Ctrl-C).
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ __all__ = ["replay"]
 EXIT_BARS_MISSED = 1
 EXIT_USAGE = 2
 EXIT_NOTHING_ANSWERED = 3
+EXIT_INTERRUPTED = 130
 
 
 def _fmt(value: float | None, spec: str = ".1f") -> str:
@@ -127,9 +128,14 @@ def replay(
             progress.update(task, advance=1, description=(
                 f"solved {counts['solved']} · none {counts['no_solution']} · failed {counts['failed']}"))
 
-        result = asyncio.run(replay_frames(
-            frames, url=url, recording=recording, ws=ws, rate_hz=rate, concurrency=concurrency, api_key=api_key,
-            timeout=timeout, retries=policy, method=method, bars=bars, on_result=on_result))
+        try:
+            result = asyncio.run(replay_frames(
+                frames, url=url, recording=recording, ws=ws, rate_hz=rate, concurrency=concurrency,
+                api_key=api_key, timeout=timeout, retries=policy, method=method, bars=bars, on_result=on_result))
+        except KeyboardInterrupt:
+            progress.stop()
+            err.print("[yellow]skyfix replay:[/] interrupted")
+            raise typer.Exit(EXIT_INTERRUPTED) from None
     missed = result.missed_bars(min_rate=min_rate, max_wrong=max_wrong)
     result.bars = {"min_rate": min_rate, "max_wrong": max_wrong, "passed": not missed, "missed": missed}
     out.print(render_table(result))

@@ -11,6 +11,7 @@ number (0-based). With ``track=true`` each solution is the attitude hint of the 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import partial
 from typing import Annotated, Any
@@ -23,9 +24,13 @@ from client.models import CameraSpec, SolveRequest, SolveResult, StreamAck, Stre
 from ...core import pipeline
 from ...core.centroid import decode_image
 from ...core.errors import SkyfixError
+from ...core.navdb import NavDatabase
+from ...core.types import Solution
 from .. import convert
 from ..deps import API_KEY_HEADER, CamerasDep, NavDbDep, SettingsDep, SolverDep, key_ok
 from ..errors import ApiError, error_status
+from ..settings import Settings
+from ..solver import Solver
 
 router = APIRouter(prefix="/v1", tags=["stream"])
 
@@ -71,7 +76,8 @@ async def stream(
 class _Frames:
     """Turns one message into one reply (text)."""
 
-    def __init__(self, db: Any, solver: Any, cameras: Any, settings: Any, state: StreamState) -> None:
+    def __init__(self, db: NavDatabase, solver: Solver, cameras: Mapping[str, convert.CameraEntry],
+                 settings: Settings, state: StreamState) -> None:
         self.db, self.solver, self.cameras, self.settings, self.state = db, solver, cameras, settings, state
 
     async def handle(self, text: str | None, data: bytes | None) -> str:
@@ -96,7 +102,8 @@ class _Frames:
             return StreamError(id=frame_id, code=code, detail=detail, field=field).model_dump_json()
         self.solver.metrics.ws_frames[kind] += 1
         if self.state.track:
-            self.state.last = (sol.quaternion, self.state.hint_radius_deg) if sol.solved else None  # type: ignore[assignment]
+            q = sol.quaternion
+            self.state.last = (q, self.state.hint_radius_deg) if sol.solved and q is not None else None
         return SolveResult.model_validate(sol.to_dict(frame_id)).model_dump_json()
 
     def _parse(self, text: str) -> Any:
@@ -107,13 +114,13 @@ class _Frames:
         except ValueError as exc:
             raise ApiError(400, f"message is not valid JSON: {exc}", "body") from None
 
-    async def _centroids(self, req: SolveRequest) -> Any:
+    async def _centroids(self, req: SolveRequest) -> Solution:
         track = self.state.last if self.state.track else None
         call = convert.frame_call(req, self.db, self.cameras, max_centroids=self.settings.max_centroids,
                                   options=self.solver.options, track_hint=track)
         return await self.solver.solve(call)
 
-    async def _image(self, data: bytes) -> Any:
+    async def _image(self, data: bytes) -> Solution:
         st = self.state
         if len(data) > self.settings.max_image_bytes:
             raise ApiError(413, f"image is {len(data)} bytes, the limit is {self.settings.max_image_bytes}", "image")

@@ -71,10 +71,14 @@ def render_table(report: ReplayReport) -> Table:
     table.add_row("throughput", f"{report.throughput_fps:.1f} frames/s over {report.wall_s:.2f} s")
     if report.transport == "ws":
         table.add_row("reconnects", str(report.reconnects))
-    for fail in report.failures[:5]:
-        table.add_row("[red]failed[/]", f"{fail['id']!r}: {fail['error']}")
-    if len(report.failures) > 5:
-        table.add_row("[red]failed[/]", f"... and {len(report.failures) - 5} more (see --report)")
+    by_error: dict[str, list[object]] = {}
+    for fail in report.failures:
+        by_error.setdefault(str(fail["error"]), []).append(fail["id"])
+    for error, ids in list(by_error.items())[:3]:
+        shown = ", ".join(repr(i) for i in ids[:3]) + (", ..." if len(ids) > 3 else "")
+        table.add_row(f"[red]failed ×{len(ids)}[/]", f"{error}  [dim](ids {shown})[/]")
+    if len(by_error) > 3:
+        table.add_row("[red]failed[/]", f"... {len(by_error) - 3} other errors (see --report)")
     return table
 
 

@@ -55,6 +55,8 @@ class StarTable:
     hip: np.ndarray
     vec: np.ndarray
     mag: np.ndarray
+    blends: dict[int, tuple[int, ...]] | None = None
+    """For merged stars: HIP kept -> every HIP merged into it (simulator truth)."""
 
     def __len__(self) -> int:
         return int(self.hip.shape[0])
@@ -140,8 +142,9 @@ def select_stars(
     hip = cat.hip[keep]
     order = np.argsort(mag, kind="stable")
     vec, mag, hip = vec[order], mag[order], hip[order]
+    blends: dict[int, tuple[int, ...]] = {}
     if double_star_sep_deg > 0:
-        vec, mag, hip = _merge_doubles(vec, mag, hip, double_star_sep_deg)
+        vec, mag, hip, blends = _merge_doubles(vec, mag, hip, double_star_sep_deg)
     sel = mag <= mag_limit
     vec, mag, hip = vec[sel], mag[sel], hip[sel]
     if density_cap is not None and len(hip):
@@ -151,17 +154,18 @@ def select_stars(
         brighter_count = np.bincount(fainter, minlength=len(hip))
         sel = brighter_count < density_cap
         vec, mag, hip = vec[sel], mag[sel], hip[sel]
-    return StarTable(hip.astype(np.int32), np.ascontiguousarray(vec), mag.astype(np.float32))
+    return StarTable(hip.astype(np.int32), np.ascontiguousarray(vec), mag.astype(np.float32), blends)
 
 
 def _merge_doubles(
     vec: FloatArray, mag: FloatArray, hip: IntArray, sep_deg: float
-) -> tuple[FloatArray, FloatArray, IntArray]:
-    """Merge groups of stars closer than ``sep_deg`` (rows sorted brightest first)."""
+) -> tuple[FloatArray, FloatArray, IntArray, dict[int, tuple[int, ...]]]:
+    """Merge groups of stars closer than ``sep_deg`` (rows sorted brightest first); also
+    return the members of every merged group by the HIP kept."""
     tree = cKDTree(vec)
     pairs = tree.query_pairs(float(chord_from_angle(math.radians(sep_deg))), output_type="ndarray")
     if len(pairs) == 0:
-        return vec, mag, hip
+        return vec, mag, hip, {}
     # union-find over close pairs; each group is represented by its brightest (lowest) index
     parent = np.arange(len(hip))
 
@@ -183,4 +187,7 @@ def _merge_doubles(
     is_root = roots == np.arange(len(hip))
     new_vec = normalize(summed[is_root])
     new_mag = -2.5 * np.log10(total[is_root])
-    return new_vec, new_mag, hip[is_root]
+    members: dict[int, list[int]] = {}
+    for i in np.flatnonzero(~is_root):
+        members.setdefault(int(hip[roots[i]]), [int(hip[roots[i]])]).append(int(hip[i]))
+    return new_vec, new_mag, hip[is_root], {k: tuple(v) for k, v in members.items()}

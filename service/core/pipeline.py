@@ -47,7 +47,7 @@ class SolveOptions:
     centroid_sigma_px: float = 1.0
     match_radius_px: float | None = None
     max_false_prob: float = 1e-5
-    max_stars: int = 12
+    max_stars: int = 8
     timeout_ms: float = 500.0
 
 
@@ -115,7 +115,7 @@ def solve_rig(
     used = methods[-1] if methods else method
     for name in methods:
         ctx = SolveContext(obs, verifier, tol, deadline, options.max_stars)
-        found = get_matcher(db, name).identify(ctx)
+        found = get_matcher(db, name).identify(ctx) or verifier.best_marginal()
         if found is not None and hint is not None and not _near_hint(found.matrix, hint):
             found = None
         if found is not None:

@@ -21,6 +21,13 @@ from .catalog import StarTable, load_hipparcos, select_stars
 from .types import Centroids
 
 
+BLEND_PX = 2.0
+"""Stars closer than this many pixels land in one blob: the simulator reports them as one."""
+BLEND_DEG = 0.03
+"""... and never closer than this (degrees, above the databases' default merge radius of
+0.02 deg), so that a blend the database merged is one centroid in the simulator too."""
+
+
 @dataclass(frozen=True, slots=True)
 class SimConfig:
     """Noise model of simulated frames.
@@ -59,6 +66,7 @@ class SimFrame:
     quaternion: np.ndarray  # (4,) ICRS -> camera, [w, x, y, z]
     centroids: Centroids
     hip: np.ndarray  # (N,) int64, -1 for a false star
+    blends: dict[int, tuple[int, ...]]  # centroid index -> HIPs blended into it (when > 1)
 
     def to_record(self, frame_id: Any, camera: Camera, *, camera_spec: dict[str, Any] | None = None) -> dict[str, Any]:
         """The recorded-frame JSON object (one line of a recording)."""
@@ -70,6 +78,7 @@ class SimFrame:
             "truth": {
                 "quaternion": [float(v) for v in self.quaternion],
                 "hip": [None if h < 0 else int(h) for h in self.hip],
+                **({"blends": {str(k): list(v) for k, v in self.blends.items()}} if self.blends else {}),
             },
         }
 
@@ -91,7 +100,7 @@ def simulate_frame(
 ) -> SimFrame:
     """One frame of ``camera`` at attitude ``quaternion`` (ICRS -> camera, [w, x, y, z])."""
     if stars is None:
-        stars = sky_stars(config.mag_limit, config.epoch, 1.5 / camera.f_px * 180 / math.pi)
+        stars = sky_stars(config.mag_limit, config.epoch, max(BLEND_PX / camera.f_px * 180 / math.pi, BLEND_DEG))
     r = quat_to_matrix(quaternion)
     boresight = r[2]
     cos_lim = math.cos(math.radians(camera.diagonal_fov_deg / 2 + 0.5))
@@ -121,7 +130,10 @@ def simulate_frame(
     if config.max_stars is not None:
         order = order[: config.max_stars]
     flux = 10.0 ** (-0.4 * (mag[order] - 6.0)) * 1000.0
-    return SimFrame(np.asarray(quaternion, dtype=np.float64), Centroids(xy[order], flux), hip[order])
+    hip = hip[order]
+    table = stars.blends or {}
+    blends = {i: table[int(h)] for i, h in enumerate(hip) if int(h) in table}
+    return SimFrame(np.asarray(quaternion, dtype=np.float64), Centroids(xy[order], flux), hip, blends)
 
 
 def simulate_frames(

@@ -10,6 +10,12 @@ lying within the match radius of some predicted star (``n_pred * pi r^2 / area``
 the observed stars not used by the hypothesis and ``n_extra`` those of them that matched.
 ``n_trials`` is the number of hypotheses the method tried (the look-elsewhere factor). A
 match is accepted when ``P <= max_false_prob``. No method returns an unverified answer.
+
+The binomial model treats unrelated stars as uniform, which flatters a near-miss: an attitude
+rotated about a point close to a few real stars matches those few for real. So an answer with
+``P > strong_false_prob`` is only *marginal*: the search goes on for ``confirm_patterns`` more
+patterns; if a strong answer turns up it wins, and if two marginal answers disagree the frame is
+ambiguous and refused. A wrong identification is worse than none.
 """
 
 from __future__ import annotations
@@ -89,9 +95,30 @@ class Verifier:
     obs: Observation
     match_radius_px: float = 4.0
     max_false_prob: float = 1e-5
+    strong_false_prob: float = 1e-12
+    confirm_patterns: int = 12
     min_matches: int = 4
     trials: int = 0
+    patterns: int = 0
     screen_stars: int = 8
+    marginal: list[Verified] = field(default_factory=list)
+    _first_marginal_at: int | None = None
+
+    def settled(self) -> bool:
+        """True once a marginal answer has had ``confirm_patterns`` patterns to be beaten."""
+        return self._first_marginal_at is not None and self.patterns - self._first_marginal_at >= self.confirm_patterns
+
+    def best_marginal(self) -> Verified | None:
+        """The most probable marginal answer, or None if there is none or they disagree."""
+        if not self.marginal:
+            return None
+        best = min(self.marginal, key=lambda v: v.false_prob)
+        limit = 3 * self.match_radius_px * self.obs.pixel_scale_rad
+        for v in self.marginal:
+            cos_angle = (np.trace(v.matrix @ best.matrix.T) - 1) / 2
+            if math.acos(max(-1.0, min(1.0, cos_angle))) > limit:
+                return None
+        return best
 
     def screen_and_check(self, obs_idx: IntArray, cands: IntArray) -> Verified | None:
         """Test every candidate triple ``cands`` ``(K, 3)`` for the observed triangle
@@ -104,6 +131,7 @@ class Verifier:
         """
         obs_idx = np.asarray(obs_idx, dtype=np.int64)
         cands = np.asarray(cands, dtype=np.int64).reshape(-1, 3)
+        self.patterns += 1
         if len(cands) == 0:
             return None
         self.trials += len(cands) - 1  # check() adds the last one
@@ -167,7 +195,13 @@ class Verifier:
         if prob > self.max_false_prob:
             return None
         r = wahba_svd(obs.vec[m_obs], stars[m_cat])
-        return Verified(m_obs, m_cat, r, prob, trials)
+        found = Verified(m_obs, m_cat, r, prob, trials)
+        if prob > self.strong_false_prob:
+            self.marginal.append(found)
+            if self._first_marginal_at is None:
+                self._first_marginal_at = self.patterns
+            return None
+        return found
 
     def _match_all(self, r_body: FloatArray) -> tuple[IntArray, IntArray, float]:
         """Pair observed and predicted stars in every camera; also return the chance that a
@@ -191,9 +225,12 @@ class Verifier:
             if len(rows) == 0 or len(near) == 0:
                 continue
             d2 = ((obs.xy[rows, None, :] - pxy[None, :, :]) ** 2).sum(axis=2)
-            best_cat = d2.argmin(axis=1)
-            best_obs = d2.argmin(axis=0)
-            ok = (d2[np.arange(len(rows)), best_cat] <= rad2) & (best_obs[best_cat] == np.arange(len(rows)))
+            close = d2 <= rad2
+            # unambiguous pairs only: exactly one candidate on each side within the radius
+            # (a false star beside a real one, or a catalogue double, proves nothing)
+            single = (close.sum(axis=1) == 1)[:, None] & (close.sum(axis=0) == 1)[None, :] & close
+            ok = single.any(axis=1)
+            best_cat = single.argmax(axis=1)
             all_obs.append(rows[ok])
             all_cat.append(near[best_cat[ok]])
         if not all_obs:

@@ -41,7 +41,8 @@ class SolveContext:
     max_stars: int = 12
 
     def expired(self) -> bool:
-        return time.perf_counter() > self.deadline
+        """Out of time, or a marginal answer has had its chance to be beaten."""
+        return time.perf_counter() > self.deadline or self.verifier.settled()
 
 
 class Matcher(Protocol):

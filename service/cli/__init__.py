@@ -1,0 +1,28 @@
+"""The ``skyfix`` command: serve, db, solve, solve-image, sim, replay."""
+
+from __future__ import annotations
+
+import typer
+
+from client.cli import replay
+
+from . import db
+from .serve import serve
+from .sim import sim
+from .solve import solve_frames
+
+app = typer.Typer(help="skyfix: lost-in-space star identification.", no_args_is_help=True,
+                  pretty_exceptions_enable=False)
+app.add_typer(db.app, name="db")
+app.command("serve")(serve)
+app.command("solve")(solve_frames)
+app.command("sim")(sim)
+app.command("replay")(replay)
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app()
+
+
+__all__ = ["app", "main"]

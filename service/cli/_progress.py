@@ -1,0 +1,45 @@
+"""A rich progress bar for database builds, shared by the CLI commands."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+err_console = Console(stderr=True, soft_wrap=True)
+
+
+@contextmanager
+def build_progress(title: str) -> Iterator[Callable[[str, float], None]]:
+    """Yield a ``(stage, fraction)`` callback drawing a progress bar on stderr."""
+    with Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f}%"),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=False,
+    ) as bar:
+        task = bar.add_task(title, total=1.0)
+
+        def update(stage: str, frac: float) -> None:
+            bar.update(task, completed=frac, description=f"{title}: {stage}")
+
+        yield update
+
+
+def resolve_db(path: Path | None) -> Path:
+    """The database to use: ``path``, or the default one (built on first use, with a bar)."""
+    from ..core.navdb import default_database_dir, ensure_default_database
+
+    if path is not None:
+        return path
+    target = default_database_dir() / "default"
+    if (target / "manifest.json").is_file():
+        return target
+    err_console.print(f"building the default navigation database in {target} (first use)")
+    with build_progress("default database") as cb:
+        return ensure_default_database(progress=cb)

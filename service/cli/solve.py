@@ -1,0 +1,66 @@
+"""``skyfix solve FRAMES.jsonl``: identify recorded frames of centroids."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+from ._progress import err_console, resolve_db
+
+
+def solve_frames(
+    frames: Annotated[Path, typer.Argument(help="Recording: JSON Lines, one frame a line ('-' = stdin).")],
+    db: Annotated[Path | None, typer.Option(help="Database directory (default: the default one).")] = None,
+    method: Annotated[str, typer.Option(help="Method name or 'auto'.")] = "auto",
+    sigma: Annotated[float, typer.Option(help="Expected centroid error, px.")] = 1.0,
+) -> None:
+    """Print one JSON result per frame on stdout, then a summary on stderr."""
+    from ..core.camera import Camera
+    from ..core.errors import SkyfixError
+    from ..core.evaluate import score
+    from ..core.navdb import open_database
+    from ..core.pipeline import SolveOptions, solve, solve_rig
+    from ..core.types import Centroids
+
+    database = open_database(resolve_db(db))
+    options = SolveOptions(centroid_sigma_px=sigma)
+    stream = sys.stdin if str(frames) == "-" else open(frames)
+    times, n, solved, wrong, checked = [], 0, 0, 0, 0
+    with stream:
+        for lineno, line in enumerate(stream, 1):
+            if not line.strip():
+                continue
+            n += 1
+            try:
+                rec: dict[str, Any] = json.loads(line)
+                if rec.get("cameras"):
+                    rig = [(Centroids.from_list(c["centroids"], field_name=f"cameras[{i}].centroids"),
+                            Camera.from_spec(c["camera"], field=f"cameras[{i}].camera"),
+                            c["camera"].get("mounting_quaternion")) for i, c in enumerate(rec["cameras"])]
+                    sol = solve_rig(rig, database, method=method, options=options)
+                else:
+                    sol = solve(Centroids.from_list(rec.get("centroids", [])), Camera.from_spec(rec.get("camera") or {}),
+                                database, method=method, options=options)
+            except (SkyfixError, ValueError, KeyError, TypeError) as exc:
+                err_console.print(f"[red]line {lineno}:[/red] {exc}")
+                raise typer.Exit(2) from None
+            out = sol.to_dict(rec.get("id"))
+            typer.echo(json.dumps(out))
+            times.append(sol.timings_ms.get("total", 0.0))
+            solved += sol.solved
+            truth = rec.get("truth") or {}
+            if sol.solved and truth:
+                blends = {int(k): v for k, v in (truth.get("blends") or {}).items()}
+                s = score(sol, truth.get("quaternion"), truth.get("hip"), blends=blends)
+                checked += 1
+                wrong += not s.correct
+    t = np.array(times) if times else np.zeros(1)
+    err_console.print(
+        f"{solved}/{n} identified ({100 * solved / max(n, 1):.1f}%), {wrong} wrong of {checked} with truth; "
+        f"solve ms p50 {np.percentile(t, 50):.2f} p95 {np.percentile(t, 95):.2f} p99 {np.percentile(t, 99):.2f}"
+    )

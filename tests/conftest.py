@@ -1,0 +1,35 @@
+"""Shared fixtures: the real catalogue, real databases built into a temp dir, seeded rngs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from service.core.camera import Camera
+from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SEED000_CAMERA = Camera.from_focal(94.9489, 14.0, 1024, 1024)
+"""Seed 000's camera: 1024x1024, f 94.9489 mm, 14 um pixels (8.6 deg across)."""
+
+
+def seed000_config(methods: tuple[str, ...] = ("pyramid", "maxangle")) -> BuildConfig:
+    cam = SEED000_CAMERA
+    return BuildConfig(fov_max_deg=cam.diagonal_fov_deg + 0.2, fov_min_deg=cam.fov_deg, mag_limit=6.5,
+                       epoch=2026.0, methods=methods)
+
+
+@pytest.fixture(scope="session")
+def seed000_db(tmp_path_factory: pytest.TempPathFactory) -> NavDatabase:
+    """A database for seed 000's camera (maxangle + pyramid), built once per test session."""
+    path = tmp_path_factory.mktemp("db") / "seed000"
+    build_database(path, seed000_config())
+    return open_database(path)
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20261122)

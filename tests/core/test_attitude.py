@@ -1,0 +1,104 @@
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from service.core.attitude import (
+    estimate,
+    matrix_from_radec_roll,
+    matrix_to_quat,
+    quat_multiply,
+    quat_to_matrix,
+    quest,
+    radec_roll,
+    random_rotations,
+    wahba_svd,
+)
+from service.core.camera import Camera
+from service.core.geometry import radec_to_vector
+
+quats = st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(lambda q: np.linalg.norm(q) > 0.1)
+
+
+@settings(max_examples=200, deadline=None)
+@given(quats)
+def test_quaternion_matrix_round_trip(q: list[float]) -> None:
+    qa = np.asarray(q) / np.linalg.norm(q)
+    r = quat_to_matrix(qa)
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(r) == pytest.approx(1.0)
+    back = matrix_to_quat(r)
+    assert abs(abs(back @ qa) - 1) < 1e-12
+
+
+def test_hamilton_product_composes_matrices() -> None:
+    a, b = random_rotations(2, np.random.default_rng(3))
+    np.testing.assert_allclose(quat_to_matrix(quat_multiply(a, b)), quat_to_matrix(a) @ quat_to_matrix(b), atol=1e-12)
+
+
+def test_identity_attitude_looks_at_ra0_dec0_with_north_up() -> None:
+    # boresight +z = ICRS +x (RA 0, Dec 0); image-up (-y) = north (ICRS +z); right (+x) = west
+    r = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+    ra, dec, roll = radec_roll(r)
+    assert (ra, dec, roll) == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+    np.testing.assert_allclose(matrix_from_radec_roll(0, 0, 0), r, atol=1e-15)
+    q = matrix_to_quat(r)
+    np.testing.assert_allclose(q, [0.5, 0.5, -0.5, 0.5], atol=1e-15)
+
+
+def test_roll_is_position_angle_of_image_up_east_of_north() -> None:
+    # roll 90: image-up points east
+    r = matrix_from_radec_roll(0.0, 0.0, 90.0)
+    up_icrs = -r[1]
+    np.testing.assert_allclose(up_icrs, [0, 1, 0], atol=1e-15)
+
+
+def test_known_star_at_known_pixel() -> None:
+    # Vega-ish direction at the boresight; a star 1 deg north appears straight up the image.
+    cam = Camera.from_fov(10.0, 1001, 1001)
+    r = matrix_from_radec_roll(279.23, 38.78, 0.0)
+    star = radec_to_vector(math.radians(279.23), math.radians(39.78))
+    xy, inside = cam.vector_to_pixel((r @ star)[None, :])
+    assert inside[0]
+    assert xy[0, 0] == pytest.approx(500.0, abs=1e-9)
+    assert xy[0, 1] == pytest.approx(500.0 - cam.f_px * math.tan(math.radians(1.0)), abs=1e-6)
+    # and one 1 deg east (RA larger) appears on the left (x < centre): the sky seen from inside
+    east = radec_to_vector(math.radians(279.23 + 1 / math.cos(math.radians(38.78))), math.radians(38.78))
+    xy, _ = cam.vector_to_pixel((r @ east)[None, :])
+    assert xy[0, 0] < 500 - 80
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(0, 359.99), st.floats(-89.9, 89.9), st.floats(0, 359.99))
+def test_radec_roll_round_trip(ra: float, dec: float, roll: float) -> None:
+    got = radec_roll(matrix_from_radec_roll(ra, dec, roll))
+    assert got[1] == pytest.approx(dec, abs=1e-9)
+    assert min(abs(got[0] - ra), 360 - abs(got[0] - ra)) < 1e-7
+    assert min(abs(got[2] - roll), 360 - abs(got[2] - roll)) < 1e-7
+
+
+def test_wahba_svd_and_quest_agree_with_noise(rng: np.random.Generator) -> None:
+    q = random_rotations(1, rng)[0]
+    r = quat_to_matrix(q)
+    ref = rng.normal(size=(20, 3))
+    ref /= np.linalg.norm(ref, axis=1, keepdims=True)
+    obs = ref @ r.T + rng.normal(0, 1e-4, (20, 3))
+    obs /= np.linalg.norm(obs, axis=1, keepdims=True)
+    q_svd = matrix_to_quat(wahba_svd(obs, ref))
+    assert abs(abs(q_svd @ quest(obs, ref)) - 1) < 1e-12
+    assert abs(abs(q_svd @ q) - 1) < 1e-7
+
+
+def test_estimate_reports_residuals_and_sigma(rng: np.random.Generator) -> None:
+    r = matrix_from_radec_roll(10, 20, 30)
+    cam = Camera.from_fov(10, 1024, 1024)
+    xy = rng.uniform(0, 1023, (30, 2))
+    obs = cam.pixel_to_vector(xy)
+    ref = obs @ r  # exact
+    noisy = cam.pixel_to_vector(xy + rng.normal(0, 1.0, xy.shape))
+    fit = estimate(noisy, ref)
+    px_arcsec = math.degrees(1 / cam.f_px) * 3600
+    assert fit.rms_arcsec == pytest.approx(px_arcsec * math.sqrt(2), rel=0.35)
+    assert fit.sigma_arcsec[2] > fit.sigma_arcsec[0]  # roll is the weak axis

@@ -1,0 +1,76 @@
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from service.core.camera import Camera, Rig
+from service.core.errors import InvalidInputError
+
+
+def test_fov_constructor_puts_edges_at_half_fov() -> None:
+    cam = Camera.from_fov(10.0, 1000, 800)
+    left, right = cam.pixel_to_vector(np.array([[-0.5, cam.cy], [999.5, cam.cy]]))
+    assert math.degrees(math.acos(left @ right)) == pytest.approx(10.0, abs=1e-9)
+    assert cam.fov_deg == pytest.approx(10.0)
+
+
+def test_focal_constructor_matches_seed000() -> None:
+    cam = Camera.from_focal(94.9489, 14.0, 1024, 1024)
+    assert cam.f_px == pytest.approx(94.9489e3 / 14.0)
+    assert cam.fov_deg == pytest.approx(math.degrees(2 * math.atan(7.168 / 94.9489)))
+
+
+def test_axes_convention() -> None:
+    cam = Camera.from_fov(10.0, 101, 101)
+    centre, right, down = cam.pixel_to_vector(np.array([[50.0, 50.0], [60.0, 50.0], [50.0, 60.0]]))
+    np.testing.assert_allclose(centre, [0, 0, 1], atol=1e-15)
+    assert right[0] > 0 and abs(right[1]) < 1e-15
+    assert down[1] > 0 and abs(down[0]) < 1e-15
+
+
+@pytest.mark.parametrize("dist", [None, (-0.2, 0.05, 0.001, -0.0005, 0.0), (0.1, 0.0, 0.0, 0.0)])
+def test_pixel_vector_pixel_round_trip(dist: tuple[float, ...] | None) -> None:
+    cam = Camera.from_fov(20.0, 1280, 960, distortion=dist)
+    gen = np.random.default_rng(1)
+    xy = np.column_stack([gen.uniform(0, 1279, 500), gen.uniform(0, 959, 500)])
+    back, inside = cam.vector_to_pixel(cam.pixel_to_vector(xy))
+    assert inside.all()
+    np.testing.assert_allclose(back, xy, atol=1e-6)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(1.0, 60.0), st.integers(16, 4096), st.integers(16, 4096), st.floats(0, 1), st.floats(0, 1))
+def test_round_trip_property(fov: float, w: int, h: int, fx: float, fy: float) -> None:
+    cam = Camera.from_fov(fov, w, h)
+    xy = np.array([[fx * (w - 1), fy * (h - 1)]])
+    back, _ = cam.vector_to_pixel(cam.pixel_to_vector(xy))
+    np.testing.assert_allclose(back, xy, atol=1e-7 * max(w, h))
+
+
+def test_behind_camera_is_not_inside() -> None:
+    cam = Camera.from_fov(10.0, 100, 100)
+    _, inside = cam.vector_to_pixel(np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0]]))
+    assert inside.tolist() == [False, True]
+
+
+@pytest.mark.parametrize("spec,field", [
+    ({"width": 100, "height": 100}, "camera"),
+    ({"width": 0, "height": 100, "fov_deg": 10}, "camera.width"),
+    ({"width": 100, "height": 100, "fov_deg": 175}, "camera.fov_deg"),
+    ({"height": 100, "fov_deg": 10}, "camera.width"),
+])
+def test_bad_specs_name_the_field(spec: dict, field: str) -> None:
+    with pytest.raises(InvalidInputError) as err:
+        Camera.from_spec(spec)
+    assert err.value.field == field
+
+
+def test_rig_rotates_into_body() -> None:
+    cam = Camera.from_fov(10.0, 100, 100)
+    s = math.sqrt(0.5)
+    rig = Rig((cam, cam), ((1.0, 0, 0, 0), (s, s, 0, 0)))  # camera 1 rotated 90 deg about x
+    v_body = rig.body_vectors(1, np.array([[0.0, 0.0, 1.0]]))
+    from service.core.attitude import quat_to_matrix
+    np.testing.assert_allclose(quat_to_matrix(np.array([s, s, 0, 0])) @ v_body[0], [0, 0, 1], atol=1e-12)

@@ -1,0 +1,78 @@
+"""Acceptance: every method on seed 000's camera, scored against the simulator's truth."""
+
+import numpy as np
+import pytest
+
+from service.core.errors import InvalidInputError, UnknownMethodError
+from service.core.evaluate import score
+from service.core.methods import method_names
+from service.core.pipeline import solve
+from service.core.sim import SimConfig, random_points, simulate_frames
+from service.core.types import Centroids
+from tests.conftest import SEED000_CAMERA
+
+SEED000_METHODS = ["maxangle", "pyramid"]
+
+
+@pytest.fixture(scope="module")
+def frames_1px_2false():
+    return simulate_frames(SEED000_CAMERA, 500, SimConfig(mag_limit=6.5, centroid_noise_px=1.0, false_stars=2), rng=0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", SEED000_METHODS)
+def test_identifies_99_percent_with_no_wrong_answer(method: str, seed000_db, frames_1px_2false) -> None:
+    solved = wrong = 0
+    for f in frames_1px_2false:
+        sol = solve(f.centroids, SEED000_CAMERA, seed000_db, method=method)
+        s = score(sol, f.quaternion, f.hip.tolist(), blends=f.blends)
+        solved += s.solved
+        wrong += s.solved and not s.correct
+        if s.solved:
+            assert sol.method == method
+            assert s.cross_boresight_arcsec < 150  # 1 px = 30 arcsec
+    assert wrong == 0
+    assert solved >= 0.99 * len(frames_1px_2false)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["auto", *SEED000_METHODS])
+def test_random_points_never_solve(method: str, seed000_db) -> None:
+    for i in range(200):
+        pts = random_points(SEED000_CAMERA, 5 + i % 25, rng=i)
+        assert not solve(pts, SEED000_CAMERA, seed000_db, method=method).solved
+
+
+def test_solution_fields(seed000_db) -> None:
+    f = simulate_frames(SEED000_CAMERA, 1, SimConfig(centroid_noise_px=0.2), rng=42)[0]
+    sol = solve(f.centroids, SEED000_CAMERA, seed000_db)
+    assert sol.solved and sol.method in method_names()
+    d = sol.to_dict("frame-1")
+    assert d["id"] == "frame-1" and d["status"] == "solved"
+    assert len(d["quaternion"]) == 4 and abs(np.linalg.norm(d["quaternion"]) - 1) < 1e-12
+    assert 0 <= d["ra_deg"] < 360 and -90 <= d["dec_deg"] <= 90 and 0 <= d["roll_deg"] < 360
+    assert d["false_match_probability"] < 1e-5
+    assert d["rms_arcsec"] < 15
+    assert set(d["timings_ms"]) >= {"vectors", "identify", "attitude", "total"}
+    assert score(sol, f.quaternion, f.hip.tolist(), blends=f.blends).correct
+    assert all(star["residual_arcsec"] < 30 for star in d["stars"])
+    assert len(d["stars"]) >= 0.9 * (f.hip >= 0).sum()
+
+
+def test_hint_far_from_truth_refuses(seed000_db) -> None:
+    f = simulate_frames(SEED000_CAMERA, 1, SimConfig(), rng=7)[0]
+    far = (f.quaternion[1], -f.quaternion[0], f.quaternion[3], -f.quaternion[2])  # 180 deg away
+    assert not solve(f.centroids, SEED000_CAMERA, seed000_db, hint=(far, 5.0)).solved
+    assert solve(f.centroids, SEED000_CAMERA, seed000_db, hint=(f.quaternion, 5.0)).solved
+
+
+def test_too_few_and_empty(seed000_db) -> None:
+    assert not solve(Centroids.from_list([]), SEED000_CAMERA, seed000_db).solved
+    assert not solve(Centroids.from_list([[1, 2], [3, 4]]), SEED000_CAMERA, seed000_db).solved
+
+
+def test_misuse_raises(seed000_db) -> None:
+    with pytest.raises(UnknownMethodError):
+        solve(Centroids.from_list([[1, 2]]), SEED000_CAMERA, seed000_db, method="nope")
+    with pytest.raises(InvalidInputError, match="centroids"):
+        Centroids.from_list([[1, float("nan")]])

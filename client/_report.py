@@ -2,8 +2,9 @@
 
 A frame is *wrong* when the server says ``solved`` and either
 
-* a matched star contradicts the truth: the truth names another HIP for that centroid, or
-  says the centroid is a false star (``null``); or
+* a matched star contradicts the truth: the truth names another HIP for that centroid (and
+  ``truth.blends`` does not list the match among the stars merged into it), or says the
+  centroid is a false star (``null``); or
 * the attitude is off the truth quaternion by more than the bars: cross-boresight error >
   ``cross_boresight_arcsec`` (default 120″ = 2′) or roll error > ``roll_arcsec`` (default
   1800″ = 30′).
@@ -31,7 +32,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, Field
 
 from ._attitude import attitude_error
-from .models import FrameId, RecordedFrame, SolveResult
+from .models import FrameId, RecordedFrame, SolveResult, Truth
 
 __all__ = ["Distribution", "FrameReport", "ReplayReport", "WrongBars", "percentile"]
 
@@ -149,14 +150,14 @@ def score_frame(report: FrameReport, frame: RecordedFrame, result: SolveResult, 
         return
     if truth.hip is not None:
         offsets = _camera_offsets(frame)
+        blends = _blends(truth)
         for star in result.stars:
             base = offsets[star.camera] if star.camera < len(offsets) else None
             idx = None if base is None else base + star.centroid
             if idx is None or not 0 <= idx < len(truth.hip):
                 continue
             report.hip_checked += 1
-            expected = truth.hip[idx]
-            if expected != star.hip:
+            if star.hip != truth.hip[idx] and star.hip not in blends.get(idx, ()):
                 report.hip_wrong += 1
         if report.hip_wrong:
             report.reasons.append(f"{report.hip_wrong} of {report.hip_checked} HIP disagree with truth")
@@ -170,6 +171,20 @@ def score_frame(report: FrameReport, frame: RecordedFrame, result: SolveResult, 
         if abs(err.roll_arcsec) > bars.roll_arcsec:
             report.reasons.append(f"roll error {abs(err.roll_arcsec):.1f}\" > {bars.roll_arcsec:g}\"")
     report.wrong = bool(report.reasons)
+
+
+def _blends(truth: Truth) -> dict[int, set[int]]:
+    """``truth.blends`` (``{"centroid index": [HIP, ...]}``): stars merged into one centroid;
+    a match to any of them is right."""
+    raw = (truth.model_extra or {}).get("blends")
+    out: dict[int, set[int]] = {}
+    if isinstance(raw, dict):
+        for key, hips in raw.items():
+            try:
+                out[int(key)] = {int(h) for h in hips}
+            except (TypeError, ValueError):
+                continue
+    return out
 
 
 def _camera_offsets(frame: RecordedFrame) -> list[int]:

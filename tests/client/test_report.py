@@ -64,6 +64,17 @@ def test_hip_disagreement_or_false_star_is_wrong(stars: list[tuple[int, int]], h
     assert rep.wrong and rep.hip_wrong == 1 and "HIP" in rep.reasons[0]
 
 
+def test_a_match_to_any_member_of_a_blend_is_right() -> None:
+    f = RecordedFrame.model_validate({"id": "f", "camera": CAM, "centroids": [[1, 1], [2, 2]],
+                                      "truth": {"hip": [11, 22], "blends": {"1": [22, 23]}}})
+    rep = FrameReport(index=0, status="solved")
+    score_frame(rep, f, result(list(TRUTH_Q), [(0, 11), (1, 23)]), WrongBars())
+    assert rep.hip_checked == 2 and rep.hip_wrong == 0 and not rep.wrong
+    rep = FrameReport(index=0, status="solved")
+    score_frame(rep, f, result(list(TRUTH_Q), [(0, 23)]), WrongBars())
+    assert rep.wrong
+
+
 def test_attitude_bars() -> None:
     assert scored(rotated(121), [], [None]).wrong
     assert not scored(rotated(119), [], [None]).wrong

@@ -138,7 +138,9 @@ def render_image(
     return img.astype(np.uint8 if bit_depth == 8 else np.uint16)
 
 
-def _hot_positions(hot_pixels: int | ArrayLike, width: int, height: int, gen: np.random.Generator) -> NDArray[np.int64]:
+def _hot_positions(
+    hot_pixels: int | ArrayLike, width: int, height: int, gen: np.random.Generator
+) -> NDArray[np.int64]:
     if np.ndim(hot_pixels) == 0:
         count = int(hot_pixels)  # type: ignore[arg-type]
         if count < 0:
@@ -176,8 +178,15 @@ def star_snr(flux: ArrayLike, *, psf_sigma_px: float = 1.0, background: float = 
     return np.asarray(out)
 
 
-def random_positions(n: int, *, width: int, height: int, margin_px: float = 5.0, min_separation_px: float = 0.0,
-                     rng: np.random.Generator | int | None = None) -> FloatArray:
+def random_positions(
+    n: int,
+    *,
+    width: int,
+    height: int,
+    margin_px: float = 5.0,
+    min_separation_px: float = 0.0,
+    rng: np.random.Generator | int | None = None,
+) -> FloatArray:
     """``n`` uniform random (x, y) positions at least ``margin_px`` inside the image, at least
     ``min_separation_px`` apart (dart throwing; fewer than ``n`` if the field is too full)."""
     gen = np.random.default_rng(rng)

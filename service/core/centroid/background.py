@@ -11,6 +11,7 @@ leak into the threshold. Values at full resolution are bilinear between tile cen
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -42,7 +43,9 @@ class TileGrid:
     sigma: NDArray[np.float32]
     tile_px: int
 
-    def at(self, grid: NDArray[np.float32], x: NDArray[np.floating], y: NDArray[np.floating]) -> NDArray[np.float64]:
+    def at(
+        self, grid: NDArray[Any], x: NDArray[Any], y: NDArray[Any]
+    ) -> NDArray[np.float64]:
         """Bilinear value of ``grid`` (``level``, ``sigma`` or a combination of them) at pixel
         positions ``x``, ``y`` (same mapping as :meth:`upsample`, clamped at the edges)."""
         ny, nx = grid.shape
@@ -58,7 +61,7 @@ class TileGrid:
         bottom = g[j1, i0] * (1 - fu) + g[j1, i1] * fu
         return np.asarray(top * (1 - fv) + bottom * fv)
 
-    def upsample(self, grid: NDArray[np.generic], shape: tuple[int, int]) -> NDArray[np.generic]:
+    def upsample(self, grid: NDArray[Any], shape: tuple[int, int]) -> NDArray[Any]:
         """Bilinear full-resolution map ``(H, W)`` of a tile grid, in the grid's dtype."""
         height, width = shape
         ny, nx = grid.shape
@@ -66,7 +69,7 @@ class TileGrid:
         return np.asarray(full[:height, :width])
 
 
-def tile_statistics(image: NDArray[np.generic], *, tile_px: int, smooth: bool = True) -> TileGrid:
+def tile_statistics(image: NDArray[Any], *, tile_px: int, smooth: bool = True) -> TileGrid:
     """Median and robust sigma of ``image`` per tile.
 
     Parameters
@@ -91,7 +94,7 @@ def tile_statistics(image: NDArray[np.generic], *, tile_px: int, smooth: bool = 
     pad = ((0, ny * per_tile - sub.shape[0]), (0, nx * per_tile - sub.shape[1]))
     if pad[0][1] or pad[1][1]:
         sub = np.pad(sub, pad, mode="symmetric")
-    blocks = sub.reshape(ny, per_tile, nx, per_tile).transpose(0, 2, 1, 3).reshape(ny, nx, per_tile * per_tile)
+    blocks = sub.reshape(ny, per_tile, nx, per_tile).transpose(0, 2, 1, 3).reshape(ny, nx, -1)
     k = blocks.shape[-1] // 2
     level = np.partition(blocks, k, axis=-1)[..., k]
     dev = np.abs(blocks - level[..., None])

@@ -1,16 +1,18 @@
 """Blobs of the detection mask -> sources (peaks), reduced over the sparse mask pixels only.
 
 A blob is a connected component of the thresholded, matched-filtered image. Every blob has a
-primary source, its highest filtered pixel. Unsaturated blobs are *deblended*: every other
-local maximum of the filtered image becomes a source too when it stands out from the ridge that
-joins it to the primary by at least ``prominence`` filtered-noise sigmas and reaches
-``contrast`` times the primary's height above background. Without this, two stars a few PSF
-widths apart merge into one blob and one centroid between them.
+primary source, its highest filtered pixel. Blobs are *deblended*: every other local maximum of
+the filtered image becomes a source too when it stands out from the ridge that joins it to the
+primary by at least ``prominence`` filtered-noise sigmas and reaches ``contrast`` times the
+primary's height above background. Without this, two stars a few PSF widths apart merge into
+one blob and one centroid between them. (A saturated core is a plateau of equal filtered
+values, which yields a single maximum, so saturated blobs are deblended too.)
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,7 +25,7 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 # 8-neighbour offsets (dy, dx) before and after a pixel in raster order: a local maximum is
-# >= the ones before and > the ones after, so a plateau yields exactly one maximum.
+# >= the ones before and > the ones after, so a flat plateau yields one maximum, not many.
 _BEFORE = ((-1, -1), (-1, 0), (-1, 1), (0, -1))
 _AFTER = ((0, 1), (1, -1), (1, 0), (1, 1))
 _LINE_SAMPLES = 24
@@ -47,6 +49,8 @@ class Sources:
         Larger side of the blob's bounding box (px).
     raw_max : (M,) float64
         Highest raw pixel of the blob (image units).
+    n_saturated : (M,) int64
+        Pixels of the blob at or above the saturation level (0 without one).
     mask_flux : (M,) float64
         Sum of background-subtracted raw pixels over the blob.
     cog_x, cog_y : (M,) float64
@@ -60,6 +64,7 @@ class Sources:
     n_peaks: NDArray[np.int64]
     extent: NDArray[np.int64]
     raw_max: FloatArray
+    n_saturated: NDArray[np.int64]
     mask_flux: FloatArray
     cog_x: FloatArray
     cog_y: FloatArray
@@ -68,14 +73,14 @@ class Sources:
         return int(self.x.shape[0])
 
     def take(self, idx: IntArray) -> Sources:
-        return Sources(*(getattr(self, f)[idx] for f in self.__slots__))  # type: ignore[attr-defined]
+        return Sources(*(getattr(self, f.name)[idx] for f in fields(self)))
 
 
 def find_sources(
-    pts: NDArray[np.int32],
-    labels: NDArray[np.int32],
-    image: NDArray[np.generic],
-    det: NDArray[np.generic],
+    pts: NDArray[Any],
+    labels: NDArray[Any],
+    image: NDArray[Any],
+    det: NDArray[Any],
     raw_grid: TileGrid,
     det_grid: TileGrid,
     det_sigma: NDArray[np.float32],
@@ -115,11 +120,14 @@ def find_sources(
     extent = np.maximum(np.maximum.reduceat(xs, starts) - np.minimum.reduceat(xs, starts),
                         np.maximum.reduceat(ys, starts) - np.minimum.reduceat(ys, starts)) + 1
 
-    # Secondary peaks: local maxima of unsaturated blobs with prominence over the ridge.
+    # Secondary peaks: other local maxima of multi-pixel blobs, prominent over the ridge.
     is_max = _local_maxima(det, xs, ys, det_v, area[blob_of] >= 2)
     is_max[peak_i] = False
-    sat_blob = raw_max >= saturation if saturation is not None else np.zeros(starts.size, bool)
-    sec = np.flatnonzero(is_max & (area[blob_of] >= 2) & ~sat_blob[blob_of])
+    if saturation is not None:
+        n_sat = np.add.reduceat((raw_v >= saturation).astype(np.int64), starts)
+    else:
+        n_sat = np.zeros(starts.size, np.int64)
+    sec = np.flatnonzero(is_max)
     if sec.size:
         prim = peak_i[blob_of[sec]]
         lvl_sec = det_grid.at(det_grid.level, xs[sec], ys[sec])
@@ -138,15 +146,16 @@ def find_sources(
         n_peaks=n_peaks[blob].astype(np.int64),
         extent=extent[blob].astype(np.int64),
         raw_max=raw_max[blob],
+        n_saturated=n_sat[blob],
         mask_flux=np.add.reduceat(resid, starts)[blob],
         cog_x=cog_x[blob].astype(np.float64),
         cog_y=cog_y[blob].astype(np.float64),
     )
 
 
-def _local_maxima(det: NDArray[np.generic], xs: IntArray, ys: IntArray, centre: FloatArray,
+def _local_maxima(det: NDArray[Any], xs: IntArray, ys: IntArray, centre: FloatArray,
                   consider: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """Which of the pixels (xs, ys) are 8-neighbour maxima of ``det`` (plateaus: one each);
+    """Which of the pixels (xs, ys) are 8-neighbour maxima of ``det`` (raster tie-break);
     only pixels flagged in ``consider`` are tested, the others come back False."""
     height, width = det.shape
     out = consider.copy()
@@ -161,7 +170,9 @@ def _local_maxima(det: NDArray[np.generic], xs: IntArray, ys: IntArray, centre: 
     return out
 
 
-def _line_minimum(det: NDArray[np.generic], x0: IntArray, y0: IntArray, x1: IntArray, y1: IntArray) -> FloatArray:
+def _line_minimum(
+    det: NDArray[Any], x0: IntArray, y0: IntArray, x1: IntArray, y1: IntArray
+) -> FloatArray:
     """Lowest ``det`` value (nearest pixel) along each straight segment (x0, y0) -> (x1, y1)."""
     t = np.linspace(0.0, 1.0, _LINE_SAMPLES)[None, :]
     px = np.rint(x0[:, None] + (x1 - x0)[:, None] * t).astype(np.intp)

@@ -6,7 +6,11 @@ claims to be huge (a decompression bomb) is refused cheaply. Every failure is an
 :class:`~service.core.errors.ImageDecodeError` naming the field ``"image"``.
 
 Colour images become monochrome by averaging the colour channels (an alpha channel is dropped);
-when all colour channels are equal the native integer channel is returned unchanged.
+when all colour channels are equal the native integer channel is returned unchanged. The
+per-pixel median of the channels is the alternative for demosaiced colour frames: a hot pixel of
+the Bayer mosaic shows up in one channel only and the median drops it (on the OreSat capture it
+lifts the catalogue stars among the 200 brightest detections from 60 to 164 of 186), while on
+frames with independent noise per channel the mean is less noisy.
 """
 
 from __future__ import annotations
@@ -15,11 +19,12 @@ import io
 import struct
 import warnings
 from os import PathLike
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ImageDecodeError
+from ..errors import ImageDecodeError, InvalidInputError
 
 __all__ = ["decode_image", "load_image", "sniff_format"]
 
@@ -51,7 +56,9 @@ def sniff_format(data: bytes) -> str | None:
     return None
 
 
-def decode_image(data: bytes, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> NDArray[np.generic]:
+def decode_image(
+    data: bytes, *, max_pixels: int = DEFAULT_MAX_PIXELS, channels: str = "mean"
+) -> NDArray[Any]:
     """Decode an image file held in memory into a 2-D monochrome array.
 
     Parameters
@@ -61,6 +68,8 @@ def decode_image(data: bytes, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> NDArra
         page), FITS (first HDU with 2-D data) or a NumPy ``.npy`` file (no pickles).
     max_pixels : int, optional
         Refuse images with more pixels than this, judged from the header before decoding.
+    channels : {"mean", "median"}, optional
+        How colour channels become one: their mean (default) or their per-pixel median.
 
     Returns
     -------
@@ -76,6 +85,10 @@ def decode_image(data: bytes, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> NDArra
     """
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise ImageDecodeError("image", f"expected bytes, got {type(data).__name__}")
+    if channels not in ("mean", "median"):
+        raise InvalidInputError("channels", "must be 'mean' or 'median'")
+    if int(max_pixels) < 1:
+        raise InvalidInputError("max_pixels", "must be >= 1")
     data = bytes(data)
     if len(data) == 0:
         raise ImageDecodeError("image", "empty data")
@@ -90,14 +103,16 @@ def decode_image(data: bytes, *, max_pixels: int = DEFAULT_MAX_PIXELS) -> NDArra
         raise
     except Exception as exc:  # any decoder failure on hostile bytes is a decode error
         raise ImageDecodeError("image", f"cannot decode {fmt.upper()}: {exc}") from exc
-    return _to_mono(arr, fmt)
+    return _to_mono(arr, fmt, channels)
 
 
-def load_image(path: str | PathLike[str], *, max_pixels: int = DEFAULT_MAX_PIXELS) -> NDArray[np.generic]:
+def load_image(
+    path: str | PathLike[str], *, max_pixels: int = DEFAULT_MAX_PIXELS, channels: str = "mean"
+) -> NDArray[Any]:
     """Read an image file and decode it with :func:`decode_image` (a CLI convenience; the
     service never opens a path a client names)."""
     with open(path, "rb") as fh:
-        return decode_image(fh.read(), max_pixels=max_pixels)
+        return decode_image(fh.read(), max_pixels=max_pixels, channels=channels)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -108,11 +123,12 @@ def _check_size(height: int, width: int, max_pixels: int, fmt: str) -> None:
         raise ImageDecodeError("image", f"{fmt} header gives an empty image ({width}x{height})")
     if height * width > max_pixels:
         raise ImageDecodeError(
-            "image", f"{fmt} image is {width}x{height} = {width * height} pixels, over the limit of {max_pixels}"
+            "image",
+            f"{fmt} image is {width}x{height} = {width * height} pixels, over the limit of {max_pixels}",
         )
 
 
-def _cv2_decode(data: bytes, fmt: str) -> NDArray[np.generic]:
+def _cv2_decode(data: bytes, fmt: str) -> NDArray[Any]:
     import cv2
 
     buf = np.frombuffer(data, dtype=np.uint8)
@@ -122,7 +138,7 @@ def _cv2_decode(data: bytes, fmt: str) -> NDArray[np.generic]:
     return np.asarray(img)
 
 
-def _decode_png(data: bytes, max_pixels: int) -> NDArray[np.generic]:
+def _decode_png(data: bytes, max_pixels: int) -> NDArray[Any]:
     # The first chunk must be IHDR: length (4) "IHDR" width (4) height (4) depth colour ...
     if len(data) < 33 or data[12:16] != b"IHDR":
         raise ImageDecodeError("image", "corrupt PNG: missing IHDR header")
@@ -158,7 +174,7 @@ def _jpeg_size(data: bytes) -> tuple[int, int] | None:
     return None
 
 
-def _decode_jpeg(data: bytes, max_pixels: int) -> NDArray[np.generic]:
+def _decode_jpeg(data: bytes, max_pixels: int) -> NDArray[Any]:
     size = _jpeg_size(data)
     if size is None:
         raise ImageDecodeError("image", "corrupt JPEG: no frame header")
@@ -166,7 +182,7 @@ def _decode_jpeg(data: bytes, max_pixels: int) -> NDArray[np.generic]:
     return _cv2_decode(data, "jpeg")
 
 
-def _decode_tiff(data: bytes, max_pixels: int) -> NDArray[np.generic]:
+def _decode_tiff(data: bytes, max_pixels: int) -> NDArray[Any]:
     import tifffile
 
     with tifffile.TiffFile(io.BytesIO(data)) as tif:
@@ -184,7 +200,7 @@ def _decode_tiff(data: bytes, max_pixels: int) -> NDArray[np.generic]:
     return arr
 
 
-def _decode_fits(data: bytes, max_pixels: int) -> NDArray[np.generic]:
+def _decode_fits(data: bytes, max_pixels: int) -> NDArray[Any]:
     from astropy.io import fits
 
     with warnings.catch_warnings():
@@ -207,7 +223,7 @@ def _decode_fits(data: bytes, max_pixels: int) -> NDArray[np.generic]:
     raise ImageDecodeError("image", "FITS file has no HDU with 2-D image data")
 
 
-def _decode_npy(data: bytes, max_pixels: int) -> NDArray[np.generic]:
+def _decode_npy(data: bytes, max_pixels: int) -> NDArray[Any]:
     fh = io.BytesIO(data)
     version = np.lib.format.read_magic(fh)
     if version == (1, 0):
@@ -225,16 +241,18 @@ def _decode_npy(data: bytes, max_pixels: int) -> NDArray[np.generic]:
     return np.asarray(arr).astype(arr.dtype.newbyteorder("="), copy=False)
 
 
-def _to_mono(arr: NDArray[np.generic], fmt: str) -> NDArray[np.generic]:
+def _to_mono(arr: NDArray[Any], fmt: str, channels: str) -> NDArray[Any]:
     """(H, W) or (H, W, C) -> (H, W) uint8/uint16/float32."""
     if arr.ndim == 3:
-        channels = arr.shape[2]
-        if channels in (2, 4):  # grey+alpha or colour+alpha: drop alpha
-            arr = arr[:, :, : channels - 1]
+        depth = arr.shape[2]
+        if depth in (2, 4):  # grey+alpha or colour+alpha: drop alpha
+            arr = arr[:, :, : depth - 1]
         if arr.shape[2] == 1:
             arr = arr[:, :, 0]
         elif all(np.array_equal(arr[:, :, 0], arr[:, :, c]) for c in range(1, arr.shape[2])):
             arr = arr[:, :, 0]  # grey stored as colour: keep the native channel
+        elif channels == "median":
+            arr = np.median(arr, axis=2).astype(np.float32)
         else:
             arr = arr.mean(axis=2, dtype=np.float32)
     if arr.ndim != 2:

@@ -8,6 +8,7 @@ invalid and weigh nothing.
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,7 +20,7 @@ FloatArray = NDArray[np.float64]
 
 
 def gather_stamps(
-    image: NDArray[np.generic], cx: NDArray[np.intp], cy: NDArray[np.intp], radius: int
+    image: NDArray[Any], cx: NDArray[np.intp], cy: NDArray[np.intp], radius: int
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """Stamps of side ``2 radius + 1`` around integer centres.
 
@@ -85,7 +86,7 @@ def windowed_centroid(
     x0: FloatArray,
     y0: FloatArray,
     *,
-    window_sigma_px: float,
+    window_sigma_px: float | FloatArray,
     max_iter: int = 15,
     tol_px: float = 1e-4,
 ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
@@ -104,16 +105,18 @@ def windowed_centroid(
         Pixels inside the image.
     x0, y0 : (N,) float64
         Start positions relative to the stamp centre (px).
-    window_sigma_px : float
-        Sigma of the Gaussian window (px); best near the PSF sigma.
+    window_sigma_px : float or (N,) float64
+        Sigma of the Gaussian window (px); best near the PSF sigma (for a saturated core,
+        near its radius).
 
     Returns
     -------
     x, y : (N,) float64
         Positions relative to the stamp centre (px).
-    flux : (N,) float64
-        Windowed flux ``2 sum(w I)`` at the final position: the total flux of a Gaussian star
-        whose sigma equals the window's, with the noise of an aperture of ~``4 pi sigma^2`` px.
+    weighted : (N,) float64
+        ``sum(w I)`` at the final position, ``w`` peaking at 1. For a Gaussian star of sigma
+        ``s`` and total flux ``F``, ``F = weighted * (s^2 + sigma_w^2) / sigma_w^2``; its noise
+        is that of an aperture of ~``4 pi sigma_w^2`` px.
     ok : (N,) bool
         False where the weighted flux vanished or the position left the central region; the
         caller should keep its start value there.
@@ -121,7 +124,7 @@ def windowed_centroid(
     r = stamps.shape[1] // 2
     off = np.arange(-r, r + 1, dtype=np.float64)
     x, y = x0.astype(np.float64).copy(), y0.astype(np.float64).copy()
-    inv2s2 = 1.0 / (2.0 * window_sigma_px**2)
+    inv2s2 = np.broadcast_to(1.0 / (2.0 * np.asarray(window_sigma_px, dtype=np.float64) ** 2), x.shape)
     data = np.where(valid, stamps, 0.0)
     active = np.ones(len(x), dtype=bool)
     total = np.ones(len(x))
@@ -131,7 +134,8 @@ def windowed_centroid(
         idx = np.flatnonzero(active)
         dx = off[None, :] - x[idx, None]  # (n, S) along columns
         dy = off[None, :] - y[idx, None]  # (n, S) along rows
-        wx, wy = np.exp(-dx * dx * inv2s2), np.exp(-dy * dy * inv2s2)
+        k = inv2s2[idx, None]
+        wx, wy = np.exp(-dx * dx * k), np.exp(-dy * dy * k)
         wi = data[idx] * wy[:, :, None] * wx[:, None, :]
         s = wi.sum(axis=(1, 2))
         sx = (wi.sum(axis=1) * dx).sum(axis=1)
@@ -147,7 +151,7 @@ def windowed_centroid(
     limit = max(1.5, 0.5 * r)
     ok = (total > 0) & (np.abs(x - x0) <= limit) & (np.abs(y - y0) <= limit) & np.isfinite(x) & np.isfinite(y)
     xe, ye = np.where(ok, x, x0), np.where(ok, y, y0)
-    wx = np.exp(-((off[None, :] - xe[:, None]) ** 2) * inv2s2)
-    wy = np.exp(-((off[None, :] - ye[:, None]) ** 2) * inv2s2)
-    flux = 2.0 * np.einsum("nij,ni,nj->n", data, wy, wx)
-    return x, y, flux, ok
+    wx = np.exp(-((off[None, :] - xe[:, None]) ** 2) * inv2s2[:, None])
+    wy = np.exp(-((off[None, :] - ye[:, None]) ** 2) * inv2s2[:, None])
+    weighted = np.einsum("nij,ni,nj->n", data, wy, wx)
+    return x, y, weighted, ok

@@ -1,0 +1,1 @@
+"""Benchmarks: `python -m bench.<name>`; outputs go to bench/out (git-ignored)."""

@@ -14,7 +14,9 @@ frames/s and latency percentiles as a markdown table (stdout and ``--out``), plu
   flight (a rig pipelining frames); latency = frame sent -> its result received, queueing in
   the window included.
 
-The client runs on the same machine, so it competes with the server for the CPU.
+The client runs on the same machine, so it competes with the server for the CPU; "server CPU
+ms/frame" (user + system time of the server's processes over the run, per frame) does not
+depend on that competition: cores / it is the throughput ceiling.
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ class Row:
     p50_ms: float
     p95_ms: float
     p99_ms: float
+    server_cpu_ms: float
     solved: float
 
 
@@ -80,8 +83,27 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def group_cpu_s(pgid: int) -> float:
+    """CPU seconds (user + system) used so far by every process of a process group (Linux)."""
+    total = 0
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid:  # fields after "(comm)": state, ppid, pgrp, ..., utime, stime
+            total += int(fields[11]) + int(fields[12])
+    return total / os.sysconf("SC_CLK_TCK")
+
+
+@dataclass
+class Server:
+    url: str
+    pgid: int
+
+
 @contextmanager
-def served(workers: int, db: Path | None) -> Iterator[str]:
+def served(workers: int, db: Path | None) -> Iterator[Server]:
     """``skyfix serve --workers N`` on a free loopback port, until the block ends."""
     port = free_port()
     args = [sys.executable, "-m", "service.cli.serve", "--workers", str(workers), "--port", str(port),
@@ -104,7 +126,7 @@ def served(workers: int, db: Path | None) -> Iterator[str]:
                 raise SystemExit("skyfix serve did not come up")
             time.sleep(0.1)
         time.sleep(0.5 * workers)  # let every worker finish its lifespan
-        yield url
+        yield Server(url, proc.pid)
     finally:
         os.killpg(proc.pid, signal.SIGTERM)
         proc.wait(timeout=30)
@@ -172,22 +194,25 @@ async def run_mode(mode: str, url: str, payloads: list[bytes], clients: int, win
     return time.perf_counter() - t0, lat, sum(counts)
 
 
-def measure(mode: str, url: str, payloads: list[bytes], workers: int, clients: int, window: int) -> Row:
+def measure(mode: str, server: Server, payloads: list[bytes], workers: int, clients: int, window: int) -> Row:
+    url = server.url
     asyncio.run(run_mode(mode, url, payloads[: max(50, clients * 10)], clients, window))  # warm up
+    cpu0 = group_cpu_s(server.pgid)
     seconds, lat, solved = asyncio.run(run_mode(mode, url, payloads, clients, window))
+    cpu_ms = (group_cpu_s(server.pgid) - cpu0) * 1e3 / len(payloads)
     ms = np.asarray(lat) * 1e3
     p50, p95, p99 = (float(np.percentile(ms, q)) for q in (50, 95, 99))
     return Row(mode, workers, clients, window if mode == "ws" else 1, len(payloads), round(seconds, 3),
                round(len(payloads) / seconds, 1), round(p50, 2), round(p95, 2), round(p99, 2),
-               round(solved / len(payloads), 4))
+               round(cpu_ms, 3), round(solved / len(payloads), 4))
 
 
 def table(rows: list[Row]) -> str:
     head = ("| mode | workers | clients | in flight / client | frames | frames/s | p50 ms | p95 ms | p99 ms "
-            "| solved |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n")
+            "| server CPU ms/frame | solved |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n")
     return head + "".join(
         f"| {r.mode} | {r.workers} | {r.clients} | {r.window} | {r.frames} | {r.fps:.0f} | {r.p50_ms:.2f} "
-        f"| {r.p95_ms:.2f} | {r.p99_ms:.2f} | {100 * r.solved:.1f}% |\n" for r in rows)
+        f"| {r.p95_ms:.2f} | {r.p99_ms:.2f} | {r.server_cpu_ms:.2f} | {100 * r.solved:.1f}% |\n" for r in rows)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -204,16 +229,18 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
 
     payloads = make_payloads(args.frames, args.seed, args.method)
+    load0 = os.getloadavg()[0]
     rows: list[Row] = []
     for workers in args.workers:
-        with served(workers, args.db) as url:
+        with served(workers, args.db) as server:
             for clients in args.clients:
                 for mode in args.modes:
-                    rows.append(measure(mode, url, payloads, workers, clients, args.window))
+                    rows.append(measure(mode, server, payloads, workers, clients, args.window))
                     print(table(rows[-1:]).splitlines()[-1], flush=True)
     machine = f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
     command = "python -m bench.bench_service " + " ".join(argv if argv is not None else sys.argv[1:])
-    report = f"`{command.strip()}` on {machine}\n\n{table(rows)}"
+    load = os.getloadavg()[0]
+    report = f"`{command.strip()}` on {machine} (load average before: {load0:.2f}, after: {load:.2f})\n\n{table(rows)}"
     print("\n" + report)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(report)

@@ -103,7 +103,7 @@ def test_image_upload_of_a_rendered_frame(client: httpx.Client, frames: list[Sim
     assert r2.json()["status"] == "solved", r2.text
 
 
-REAL_TIFF = "tetra3/2019-07-29T204726_Alt40_Azi-135_Try1.tiff"
+REAL_TIFF = "tetra3/2019-07-29T204726_Alt40_Azi45_Try1.tiff"
 
 
 def test_real_tetra3_tiff(client: httpx.Client) -> None:

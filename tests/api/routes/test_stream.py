@@ -98,7 +98,7 @@ def test_config_message_then_binary_images(server: LiveServer, frames: list[SimF
         bad = exchange(ws, [json.dumps({"type": "config", "method": "nope"})])[0]
         assert (bad["code"], bad["field"]) == (422, "method")
         result = exchange(ws, [png_of(frame)])[0]
-        assert result["status"] == "solved" and result["id"] == 4, result
+        assert result["status"] == "solved" and result["id"] == 3, result
         assert angle_deg(result["quaternion"], frame.quaternion) < 0.05
 
 

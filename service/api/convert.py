@@ -20,11 +20,14 @@ from client.models import AttitudeHint, CameraSpec, SolveRequest
 from ..core import pipeline
 from ..core.camera import Camera
 from ..core.errors import InvalidInputError
-from ..core.methods import resolve as resolve_methods
-from ..core.navdb import NavDatabase
+from ..core.errors import UnknownMethodError
+from ..core.methods import get_method
+from ..core.navdb import NavDatabase, NavDatabaseSet
 from ..core.pipeline import SolveOptions
 from ..core.types import Centroids, Solution
 
+NavDb = NavDatabase | NavDatabaseSet
+"""One database, or a set whose member the engine picks per camera."""
 Quat = tuple[float, float, float, float]
 Hint = tuple[Quat, float]
 SolveCall = Callable[[], Solution]
@@ -90,12 +93,16 @@ def hint(h: AttitudeHint | None) -> Hint | None:
     return None if h is None else (unit_quaternion(h.quaternion, "attitude_hint.quaternion"), h.radius_deg)
 
 
-def check_method(db: NavDatabase, name: str) -> None:
+def check_method(db: NavDb, name: str) -> None:
     """Raise ``UnknownMethodError`` (422, field ``method``) before any work is queued."""
-    resolve_methods(db, name)
+    if name == "auto":
+        return
+    get_method(name)  # registered at all?
+    if name not in db.methods:
+        raise UnknownMethodError(name, ["auto", *db.methods])
 
 
-def frame_call(req: SolveRequest, db: NavDatabase, named: Mapping[str, CameraEntry], *,
+def frame_call(req: SolveRequest, db: NavDb, named: Mapping[str, CameraEntry], *,
                max_centroids: int, options: SolveOptions, track_hint: Hint | None = None) -> SolveCall:
     """The engine call for one request: a single camera, or a rig (``cameras``)."""
     check_method(db, req.method)

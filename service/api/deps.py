@@ -14,8 +14,7 @@ from fastapi import Depends, Request
 from fastapi.security import APIKeyHeader
 from starlette.requests import HTTPConnection
 
-from ..core.navdb import NavDatabase
-from .convert import CameraEntry
+from .convert import CameraEntry, NavDb
 from .errors import ApiError
 from .metrics import Metrics
 from .settings import Settings
@@ -26,8 +25,8 @@ _api_key_scheme = APIKeyHeader(name=API_KEY_HEADER, auto_error=False,
                                description="Required when the server has SKYFIX_API_KEY set.")
 
 
-async def get_db(conn: HTTPConnection) -> NavDatabase:
-    db: NavDatabase = conn.app.state.db
+async def get_db(conn: HTTPConnection) -> NavDb:
+    db: NavDb = conn.app.state.db
     return db
 
 
@@ -51,7 +50,7 @@ async def get_metrics(conn: HTTPConnection) -> Metrics:
     return metrics
 
 
-NavDbDep = Annotated[NavDatabase, Depends(get_db)]
+NavDbDep = Annotated[NavDb, Depends(get_db)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 SolverDep = Annotated[Solver, Depends(get_solver)]
 CamerasDep = Annotated[Mapping[str, CameraEntry], Depends(get_cameras)]

@@ -24,7 +24,6 @@ from client.models import CameraSpec, SolveRequest, SolveResult, StreamAck, Stre
 from ...core import pipeline
 from ...core.centroid import decode_image
 from ...core.errors import SkyfixError
-from ...core.navdb import NavDatabase
 from ...core.types import Solution
 from .. import convert
 from ..deps import API_KEY_HEADER, CamerasDep, NavDbDep, SettingsDep, SolverDep, key_ok
@@ -76,7 +75,7 @@ async def stream(
 class _Frames:
     """Turns one message into one reply (text)."""
 
-    def __init__(self, db: NavDatabase, solver: Solver, cameras: Mapping[str, convert.CameraEntry],
+    def __init__(self, db: convert.NavDb, solver: Solver, cameras: Mapping[str, convert.CameraEntry],
                  settings: Settings, state: StreamState) -> None:
         self.db, self.solver, self.cameras, self.settings, self.state = db, solver, cameras, settings, state
 

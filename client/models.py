@@ -136,6 +136,12 @@ class SolveResult(BaseModel):
     )
     method: str = Field(description="Method that produced the answer (or the last one tried).")
     timings_ms: dict[str, float] = Field(default_factory=dict, description="Per-stage wall time, ms.")
+    wcs: dict[str, float | str] | None = Field(
+        None,
+        description="Images only: FITS WCS (TAN) of the solution: CTYPE1/2, CRVAL1/2 (deg), CRPIX1/2 "
+        "(1-based FITS pixels), CD1_1..CD2_2 (deg/px), NAXIS1/2.",
+    )
+    n_detected: int | None = Field(None, description="Images only: stars detected in the image.")
 
 
 class Truth(BaseModel):

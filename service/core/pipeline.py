@@ -11,6 +11,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -18,7 +19,7 @@ from .attitude import ARCSEC_PER_RAD, estimate, matrix_to_quat, quat_to_matrix, 
 from .camera import Camera
 from .errors import InvalidInputError
 from .methods import SolveContext, get_matcher, resolve
-from .navdb.reader import NavDatabase
+from .navdb.reader import NavDatabase, NavDatabaseSet
 from .types import Centroids, Solution, SolveStatus, StarMatch
 from .verify import Observation, Verified, Verifier
 
@@ -57,7 +58,7 @@ DEFAULT_OPTIONS = SolveOptions()
 def solve(
     centroids: Centroids,
     camera: Camera,
-    db: NavDatabase,
+    db: NavDatabase | NavDatabaseSet,
     *,
     method: str = "auto",
     hint: tuple[Quaternion, float] | None = None,
@@ -77,13 +78,15 @@ def solve(
         Prior attitude; answers whose boresight lies farther than ``radius_deg`` are refused.
     """
     identity = np.eye(3)
+    if isinstance(db, NavDatabaseSet):
+        db = db.for_camera(camera.fov_deg, camera.diagonal_fov_deg)
     return solve_rig([(centroids, camera, None)], db, method=method, hint=hint, options=options,
                      _mountings=[identity])
 
 
 def solve_rig(
     frames: Sequence[tuple[Centroids, Camera, Quaternion | None]],
-    db: NavDatabase,
+    db: NavDatabase | NavDatabaseSet,
     *,
     method: str = "auto",
     hint: tuple[Quaternion, float] | None = None,
@@ -98,6 +101,9 @@ def solve_rig(
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
+    if isinstance(db, NavDatabaseSet):
+        widest = max((cam for _, cam, _ in frames), key=lambda c: c.diagonal_fov_deg, default=None)
+        db = db.for_camera(widest.fov_deg, widest.diagonal_fov_deg) if widest else next(iter(db.members.values()))
     methods = resolve(db, method)
     if not frames:
         raise InvalidInputError("cameras", "at least one camera frame is required")
@@ -201,4 +207,59 @@ def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma
     )
 
 
-__all__ = ["ARCSEC_PER_RAD", "DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_rig"]
+def solve_image(
+    image: np.ndarray,
+    camera: Camera,
+    db: NavDatabase | NavDatabaseSet,
+    *,
+    method: str = "auto",
+    hint: tuple[Quaternion, float] | None = None,
+    options: SolveOptions = DEFAULT_OPTIONS,
+    detect: dict[str, Any] | None = None,
+) -> Solution:
+    """Detect the stars of a monochrome image, identify them, and attach the FITS WCS.
+
+    ``detect`` passes keyword options to :func:`service.core.centroid.extract`. The image must
+    match the camera's size.
+    """
+    from .centroid import extract
+
+    if image.ndim != 2:
+        raise InvalidInputError("image", f"expected a 2-D monochrome image, got shape {image.shape}")
+    if image.shape != (camera.height, camera.width):
+        raise InvalidInputError(
+            "camera", f"image is {image.shape[1]}x{image.shape[0]} px, camera says {camera.width}x{camera.height}"
+        )
+    t0 = time.perf_counter()
+    found = extract(image, **(detect or {}))
+    t_detect = (time.perf_counter() - t0) * 1e3
+    sol = solve(found.centroids, camera, db, method=method, hint=hint, options=options)
+    timings = {"detect": t_detect, **sol.timings_ms}
+    timings["total"] = timings.get("total", 0.0) + t_detect
+    object.__setattr__(sol, "timings_ms", timings)
+    object.__setattr__(sol, "n_detected", len(found))
+    if sol.solved and sol.quaternion is not None:
+        object.__setattr__(sol, "wcs", tan_wcs(quat_to_matrix(np.asarray(sol.quaternion)), camera))
+    return sol
+
+
+def tan_wcs(r: np.ndarray, camera: Camera) -> dict[str, Any]:
+    """FITS WCS (gnomonic TAN) of an ICRS -> camera attitude: the reference pixel is the
+    principal point; CD maps FITS pixel offsets to (east, north) tangent-plane degrees.
+    Lens distortion, if any, is not represented (no SIP terms)."""
+    ra, dec, _ = radec_roll(r)
+    a, d = math.radians(ra), math.radians(dec)
+    east = np.array([-math.sin(a), math.cos(a), 0.0])
+    north = np.array([-math.sin(d) * math.cos(a), -math.sin(d) * math.sin(a), math.cos(d)])
+    k = math.degrees(1.0) / camera.f_px
+    return {
+        "CTYPE1": "RA---TAN", "CTYPE2": "DEC--TAN",
+        "CRVAL1": ra, "CRVAL2": dec,
+        "CRPIX1": camera.cx + 1.0, "CRPIX2": camera.cy + 1.0,
+        "CD1_1": k * float(r[0] @ east), "CD1_2": k * float(r[1] @ east),
+        "CD2_1": k * float(r[0] @ north), "CD2_2": k * float(r[1] @ north),
+        "NAXIS1": camera.width, "NAXIS2": camera.height,
+    }
+
+
+__all__ = ["ARCSEC_PER_RAD", "DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_image", "solve_rig", "tan_wcs"]

@@ -99,6 +99,8 @@ class Solution:
     false_match_probability: float | None = None
     attitude_sigma_arcsec: tuple[float, float, float] | None = None
     timings_ms: dict[str, float] = field(default_factory=dict)
+    wcs: dict[str, Any] | None = None
+    n_detected: int | None = None
 
     @property
     def solved(self) -> bool:
@@ -136,4 +138,6 @@ class Solution:
             else [float(v) for v in self.attitude_sigma_arcsec],
             "method": self.method,
             "timings_ms": {k: float(v) for k, v in self.timings_ms.items()},
+            **({"wcs": self.wcs} if self.wcs is not None else {}),
+            **({"n_detected": self.n_detected} if self.n_detected is not None else {}),
         }

@@ -38,7 +38,7 @@ from .base import Progress, SolveContext
 THETA_LO = math.pi / 3
 THETA_SPAN = 2 * math.pi / 3
 THETA_MAX_USABLE = math.radians(175.0)
-MAX_CANDIDATES = 64
+MAX_CANDIDATES = 1000
 
 
 def triangle_features(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ from ..verify import Verified
 from ._pairs import build_pair_table, directed_edges, edge_keys, join_triangles, pattern_order, same_handedness
 from .base import Progress, SolveContext
 
-MAX_CANDIDATES = 64
+MAX_CANDIDATES = 1000
 """Triangles matching more catalogue triples than this are skipped as uninformative."""
 
 

@@ -13,7 +13,8 @@ import json
 import os
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..catalog import CATALOGUE_NAME, StarTable, load_hipparcos, select_stars
-from .format import FORMAT_NAME, MANIFEST, SCHEMA_VERSION, array_file, sha256_file
+from .format import FORMAT_NAME, MANIFEST, SCHEMA_VERSION, SET_FORMAT_NAME, array_file, sha256_file
 
 Progress = Callable[[str, float], None]
 """Progress callback: ``(stage description, fraction done in [0, 1])``."""
@@ -90,17 +91,74 @@ def build_database(out: str | os.PathLike[str], config: BuildConfig, *, progress
     Returns the path. ``out`` becomes a symlink to a versioned sibling directory
     ``.<name>.<timestamp>``; readers only ever see a complete database.
     """
-    from ..methods import get_method, method_names
-
-    t0 = time.perf_counter()
     out = Path(out)
+    with _staging(out) as tmp:
+        _write_member(tmp, config, progress)
+    progress("done", 1.0)
+    return out
+
+
+def build_database_set(
+    out: str | os.PathLike[str], members: dict[str, BuildConfig], *, progress: Progress = _noop
+) -> Path:
+    """Build a *set* of databases at ``out``: one member per field-of-view range (e.g. a deep
+    narrow-field member and a bright wide-field one). ``open_database`` returns a
+    ``NavDatabaseSet`` that picks the member for each camera. Atomic like ``build_database``.
+    """
+    out = Path(out)
+    if not members or not all(n.isidentifier() for n in members):
+        raise ValueError("members need identifier names")
+    with _staging(out) as tmp:
+        listing = {}
+        for i, (name, cfg) in enumerate(members.items()):
+            lo, hi = i / len(members), (i + 1) / len(members)
+
+            def sub(stage: str, frac: float, lo: float = lo, hi: float = hi, n: str = name) -> None:
+                progress(f"{n}: {stage}", lo + (hi - lo) * frac)
+
+            (tmp / name).mkdir()
+            m = _write_member(tmp / name, cfg, sub)
+            listing[name] = {"fov_min_deg": m["fov_min_deg"], "fov_max_deg": m["fov_max_deg"],
+                             "mag_limit": m["mag_limit"], "n_stars": m["n_stars"]}
+        _write_json(tmp / MANIFEST, {"format": SET_FORMAT_NAME, "schema_version": SCHEMA_VERSION,
+                                     "built_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+                                     "members": listing})
+    progress("done", 1.0)
+    return out
+
+
+@contextmanager
+def _staging(out: Path) -> Iterator[Path]:
+    """A fresh hidden directory beside ``out``; on success it is published at ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
     for stale in out.parent.glob(f".{out.name}.tmp-*"):
         shutil.rmtree(stale, ignore_errors=True)
     stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%S%f")
     tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{stamp}"
     tmp.mkdir()
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    final = out.parent / f".{out.name}.{stamp}"
+    os.rename(tmp, final)
+    _swap_symlink(out, final)
+    _fsync_dir(out.parent)
 
+
+def _write_json(path: Path, obj: Any) -> None:
+    with open(path, "w") as fh:
+        json.dump(obj, fh, indent=1)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def _write_member(directory: Path, config: BuildConfig, progress: Progress) -> dict[str, Any]:
+    """Write one database (arrays, then the manifest) into ``directory``; return the manifest."""
+    from ..methods import get_method, method_names
+
+    t0 = time.perf_counter()
     progress("reading the Hipparcos catalogue", 0.0)
     cat = load_hipparcos()
     stars: StarTable = select_stars(
@@ -113,7 +171,7 @@ def build_database(out: str | os.PathLike[str], config: BuildConfig, *, progress
     )
     arrays_meta: dict[str, Any] = {}
     for name, arr in (("stars/hip", stars.hip), ("stars/vec", stars.vec), ("stars/mag", stars.mag)):
-        arrays_meta[name] = _write_array(tmp, name, arr)
+        arrays_meta[name] = _write_array(directory, name, arr)
     progress(f"{len(stars)} navigation stars selected", 0.1)
 
     names = method_names() if "all" in config.methods else list(config.methods)
@@ -127,7 +185,7 @@ def build_database(out: str | os.PathLike[str], config: BuildConfig, *, progress
 
         tables, params = method.build_tables(stars, config, config.method_params.get(mname, {}), sub)
         for key, arr in tables.items():
-            arrays_meta[f"{mname}/{key}"] = _write_array(tmp, f"{mname}/{key}", arr)
+            arrays_meta[f"{mname}/{key}"] = _write_array(directory, f"{mname}/{key}", arr)
         methods_meta[mname] = params
 
     manifest = {
@@ -145,17 +203,8 @@ def build_database(out: str | os.PathLike[str], config: BuildConfig, *, progress
         "methods": methods_meta,
         "arrays": arrays_meta,
     }
-    mpath = tmp / MANIFEST
-    with open(mpath, "w") as fh:
-        json.dump(manifest, fh, indent=1)
-        fh.flush()
-        os.fsync(fh.fileno())
-    final = out.parent / f".{out.name}.{stamp}"
-    os.rename(tmp, final)
-    _swap_symlink(out, final)
-    _fsync_dir(out.parent)
-    progress("done", 1.0)
-    return out
+    _write_json(directory / MANIFEST, manifest)
+    return manifest
 
 
 def _swap_symlink(out: Path, target: Path) -> None:

@@ -6,20 +6,24 @@ import os
 from pathlib import Path
 
 from ..errors import DatabaseMissingError
-from .builder import BuildConfig, Progress, _noop, build_database
+from .builder import BuildConfig, Progress, _noop, build_database_set
 
 DEFAULT_NAME = "default"
 
-DEFAULT_CONFIG = BuildConfig(
-    fov_max_deg=30.0,
-    fov_min_deg=5.0,
-    mag_limit=6.5,
-    double_star_sep_deg=0.02,
-    density_cap=12,
-    density_radius_deg=4.0,
-    methods=("pyramid", "maxangle"),
-)
-"""Serves cameras from about 5 to 25 degrees (the seed-000 camera and the real test images)."""
+DEFAULT_MEMBERS: dict[str, BuildConfig] = {
+    "narrow": BuildConfig(
+        fov_min_deg=3.5, fov_max_deg=13.0, mag_limit=8.0, double_star_sep_deg=0.01,
+        density_cap=12, density_radius_deg=2.5, methods=("maxangle", "pyramid"),
+        method_params={"maxangle": {"d_max_deg": 3.5}},
+    ),
+    "wide": BuildConfig(
+        fov_min_deg=9.0, fov_max_deg=32.0, mag_limit=6.5, double_star_sep_deg=0.02,
+        density_cap=12, density_radius_deg=4.0, methods=("maxangle", "pyramid"),
+    ),
+}
+"""The default database set: a deep (V <= 8, density-capped) member for cameras of 3.5-13 deg
+diagonal, and a bright one for 9-32 deg (the seed-000 camera, the real test images, most star
+trackers and wide-field cameras)."""
 
 
 def default_database_dir() -> Path:
@@ -37,4 +41,4 @@ def ensure_default_database(*, progress: Progress = _noop, build: bool = True) -
         return path
     if not build:
         raise DatabaseMissingError(f"no default database at {path}; run `skyfix db build`")
-    return build_database(path, DEFAULT_CONFIG, progress=progress)
+    return build_database_set(path, DEFAULT_MEMBERS, progress=progress)

@@ -4,6 +4,10 @@ A database is a directory holding ``manifest.json`` and one ``.npy`` file per ar
 manifest lists, for every array, its file, dtype, shape and sha256, plus the build parameters.
 Arrays are named ``<group>/<name>``: ``stars/hip``, ``stars/vec``, ``stars/mag`` and one group
 per identification method (``pyramid/pairs`` ...). The file of ``a/b`` is ``a__b.npy``.
+
+A database *set* is a directory whose ``manifest.json`` has format ``skyfix-navdb-set`` and
+lists member databases (sub-directories, each a database as above) with the field-of-view range
+each serves; the solver picks the member for each camera.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ import hashlib
 from pathlib import Path
 
 FORMAT_NAME = "skyfix-navdb"
+SET_FORMAT_NAME = "skyfix-navdb-set"
 SCHEMA_VERSION = 1
 MANIFEST = "manifest.json"
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..catalog import StarTable
 from ..errors import DatabaseCorruptError, DatabaseMissingError
-from .format import FORMAT_NAME, MANIFEST, SCHEMA_VERSION, STAR_ARRAYS, array_file, sha256_file
+from .format import FORMAT_NAME, MANIFEST, SCHEMA_VERSION, SET_FORMAT_NAME, STAR_ARRAYS, array_file, sha256_file
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,7 @@ def _read_manifest(path: Path) -> dict[str, Any]:
         manifest = json.loads(mpath.read_text())
     except (OSError, ValueError) as exc:
         raise DatabaseCorruptError(f"{mpath}: unreadable manifest ({exc})") from exc
-    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT_NAME:
+    if not isinstance(manifest, dict) or manifest.get("format") not in (FORMAT_NAME, SET_FORMAT_NAME):
         raise DatabaseCorruptError(f"{mpath}: not a {FORMAT_NAME} manifest")
     if manifest.get("schema_version") != SCHEMA_VERSION:
         raise DatabaseCorruptError(
@@ -99,8 +99,47 @@ def _open_array(path: Path, name: str, spec: dict[str, Any]) -> np.ndarray:
     return np.load(fpath, mmap_mode="r", allow_pickle=False)
 
 
-def open_database(path: str | os.PathLike[str], *, verify_hashes: bool = False) -> NavDatabase:
-    """Open the database at ``path`` memory-mapped.
+@dataclass(frozen=True)
+class NavDatabaseSet:
+    """Several databases, each serving a range of fields of view (a deep narrow-field member,
+    a bright wide-field one, ...). ``for_camera`` picks the member for a camera; the pipeline
+    does so on every solve, so a set can stand wherever a database can."""
+
+    path: Path
+    manifest: dict[str, Any]
+    members: dict[str, NavDatabase]
+
+    def for_camera(self, fov_deg: float, diagonal_fov_deg: float | None = None) -> NavDatabase:
+        """The member serving a camera of horizontal field ``fov_deg`` and diagonal
+        ``diagonal_fov_deg`` (degrees): of the members whose range holds it (side at least
+        ``fov_min_deg``, diagonal at most ``fov_max_deg``) the deepest, i.e. the one with the
+        smallest ``fov_max_deg``; otherwise the one whose range is nearest."""
+        diag = fov_deg if diagonal_fov_deg is None else diagonal_fov_deg
+
+        def gap(db: NavDatabase) -> tuple[float, float]:
+            lo, hi = float(db.manifest["fov_min_deg"]), float(db.manifest["fov_max_deg"])
+            return max(lo - fov_deg, 0.0) + max(diag - hi, 0.0), hi
+
+        return min(self.members.values(), key=gap)
+
+    @property
+    def methods(self) -> list[str]:
+        """Methods every member holds."""
+        sets = [set(m.methods) for m in self.members.values()]
+        return sorted(set.intersection(*sets)) if sets else []
+
+    @property
+    def stars(self) -> StarTable:
+        """The star table of the member with the most stars."""
+        return max(self.members.values(), key=lambda m: len(m.stars)).stars
+
+    @property
+    def epoch(self) -> float:
+        return min(m.epoch for m in self.members.values())
+
+
+def open_database(path: str | os.PathLike[str], *, verify_hashes: bool = False) -> NavDatabase | NavDatabaseSet:
+    """Open the database (or database set) at ``path`` memory-mapped.
 
     Checks the manifest's format and schema version, and every array's presence, header,
     dtype, shape and file size; ``verify_hashes`` also checks sha256 (what ``skyfix db verify``
@@ -108,6 +147,19 @@ def open_database(path: str | os.PathLike[str], *, verify_hashes: bool = False) 
     """
     p = Path(path)
     manifest = _read_manifest(p)
+    if manifest["format"] == SET_FORMAT_NAME:
+        members = manifest.get("members")
+        if not isinstance(members, dict) or not members:
+            raise DatabaseCorruptError(f"{p / MANIFEST}: a database set with no members")
+        opened = {}
+        for name in members:
+            if not str(name).isidentifier():
+                raise DatabaseCorruptError(f"{p / MANIFEST}: bad member name {name!r}")
+            member = open_database(p / name, verify_hashes=verify_hashes)
+            if not isinstance(member, NavDatabase):
+                raise DatabaseCorruptError(f"{p / name}: nested database sets are not supported")
+            opened[name] = member
+        return NavDatabaseSet(p, manifest, opened)
     arrays: dict[str, np.ndarray] = {}
     specs = manifest.get("arrays", {})
     for name in STAR_ARRAYS:

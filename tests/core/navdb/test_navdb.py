@@ -102,3 +102,22 @@ def test_killed_build_leaves_old_database_intact(small_db: Path) -> None:
     # the next build clears the debris
     build_database(small_db, SMALL)
     assert not list(small_db.parent.glob(".small.tmp-*"))
+
+
+def test_database_set_picks_a_member_per_camera(tmp_path: Path) -> None:
+    from service.core.navdb import NavDatabaseSet, build_database_set
+
+    narrow = BuildConfig(fov_max_deg=6.0, fov_min_deg=3.0, mag_limit=5.5, epoch=2026.0, methods=("pyramid",))
+    wide = BuildConfig(fov_max_deg=30.0, fov_min_deg=6.0, mag_limit=4.5, epoch=2026.0, methods=("pyramid",))
+    path = build_database_set(tmp_path / "set", {"narrow": narrow, "wide": wide})
+    db = open_database(path, verify_hashes=True)
+    assert isinstance(db, NavDatabaseSet)
+    assert db.for_camera(4.0, 5.0).path.name == "narrow"
+    assert db.for_camera(10.0, 14.0).path.name == "wide"
+    assert db.for_camera(40.0, 50.0).path.name == "wide"  # nearest range
+    assert db.for_camera(1.0, 1.4).path.name == "narrow"
+    assert db.methods == ["pyramid"]
+    # a corrupt member is refused naming its file
+    (path.resolve() / "wide" / "stars__mag.npy").write_bytes(b"\x93NUMPY")
+    with pytest.raises(DatabaseCorruptError, match="stars__mag.npy"):
+        open_database(path)

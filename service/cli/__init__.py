@@ -10,6 +10,7 @@ from . import db
 from .serve import serve
 from .sim import sim
 from .solve import solve_frames
+from .solve_image import solve_image_files
 
 app = typer.Typer(help="skyfix: lost-in-space star identification.", no_args_is_help=True,
                   pretty_exceptions_enable=False)
@@ -17,6 +18,7 @@ app.add_typer(db.app, name="db")
 app.command("serve")(serve)
 app.command("solve")(solve_frames)
 app.command("sim")(sim)
+app.command("solve-image")(solve_image_files)
 app.command("replay")(replay)
 
 

@@ -1,0 +1,83 @@
+"""The `skyfix` command end to end, as a user runs it (subprocesses, real files)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.core.test_real_images import REAL
+
+SKYFIX = [sys.executable, "-c", "from service.cli import main; main()"]
+
+
+def run(*args: str, ok: bool = True) -> subprocess.CompletedProcess[str]:
+    proc = subprocess.run([*SKYFIX, *args], capture_output=True, text=True, timeout=300)
+    if ok:
+        assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+@pytest.fixture(scope="module")
+def small_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("cli") / "db"
+    proc = run("db", "build", "--out", str(out), "--fov-max", "12.5", "--fov-min", "8.5", "--mag-limit", "6.5",
+               "--methods", "maxangle,pyramid", "--epoch", "2026.0")
+    assert "built" in proc.stderr
+    return out
+
+
+def test_db_info_and_verify(small_db: Path) -> None:
+    info = json.loads(run("db", "info", str(small_db)).stdout)
+    assert info["n_stars"] > 8000 and set(info["methods"]) == {"maxangle", "pyramid"}
+    assert run("db", "verify", str(small_db)).stderr.startswith("OK")
+    target = small_db.resolve() / "pyramid__pairs.npy"
+    data = bytearray(target.read_bytes())
+    data[-1] ^= 0xFF
+    target.write_bytes(bytes(data))
+    bad = run("db", "verify", str(small_db), ok=False)
+    assert bad.returncode == 1 and "pyramid__pairs.npy" in bad.stderr
+
+
+def test_sim_then_solve_reports_against_truth(small_db: Path, tmp_path: Path) -> None:
+    rec = tmp_path / "frames.jsonl"
+    run("sim", "--out", str(rec), "--n", "40", "--noise", "0.5", "--false-stars", "1", "--seed", "3")
+    frames = [json.loads(line) for line in rec.read_text().splitlines()]
+    assert len(frames) == 40 and frames[0]["truth"]["quaternion"]
+    proc = run("solve", str(rec), "--db", str(small_db), "--sigma", "0.5")
+    results = [json.loads(line) for line in proc.stdout.splitlines()]
+    assert [r["id"] for r in results] == list(range(40))
+    assert sum(r["status"] == "solved" for r in results) >= 38
+    assert "0 wrong" in proc.stderr and "p50" in proc.stderr
+
+
+def test_solve_rejects_bad_frames_naming_the_line(small_db: Path, tmp_path: Path) -> None:
+    rec = tmp_path / "bad.jsonl"
+    rec.write_text('{"id": 1, "camera": {"width": 100, "height": 100}, "centroids": [[1, 2]]}\n')
+    proc = run("solve", str(rec), "--db", str(small_db), ok=False)
+    assert proc.returncode == 2 and "line 1" in proc.stderr and "camera" in proc.stderr
+    proc = run("solve", str(rec), "--db", str(small_db), "--method", "nope", ok=False)
+    assert proc.returncode != 0
+
+
+def test_db_build_refuses_unknown_method(tmp_path: Path) -> None:
+    proc = run("db", "build", "--out", str(tmp_path / "x"), "--methods", "nope", ok=False)
+    assert proc.returncode == 2 and "--methods" in proc.stderr
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.real
+@pytest.mark.skipif(not (REAL / "truth.json").is_file(), reason="real images absent")
+def test_solve_image_real_tiff(tmp_path: Path) -> None:
+    name = "tetra3/2019-07-29T204726_Alt40_Azi-45_Try1.tiff"
+    truth = json.loads((REAL / "truth.json").read_text())["images"][name]
+    db = tmp_path / "db"
+    run("db", "build", "--out", str(db), "--fov-max", "15", "--fov-min", "9", "--mag-limit", "6.5")
+    out = json.loads(run("solve-image", str(REAL / name), "--fov", "11.4", "--db", str(db)).stdout)
+    assert out["status"] == "solved" and out["wcs"]["NAXIS1"] == 1024
+    assert abs(out["ra_deg"] - truth["ra_deg"]) < 0.1 and abs(out["dec_deg"] - truth["dec_deg"]) < 0.1
+    bad = run("solve-image", str(tmp_path / "missing.png"), "--fov", "10", "--db", str(db), ok=False)
+    assert bad.returncode == 2 and "missing.png" in bad.stderr

@@ -8,7 +8,6 @@ to ``create_app`` directly.
 from __future__ import annotations
 
 import ipaddress
-import os
 from functools import lru_cache
 from pathlib import Path
 
@@ -51,8 +50,10 @@ class Settings(BaseSettings):
         500.0, gt=0, le=600_000, description="The engine stops searching after this long: no_solution."
     )
     solve_threads: int = Field(
-        default_factory=lambda: max(2, os.cpu_count() or 2), ge=1, le=256,
-        description="Solves running at once in each worker (thread pool size).",
+        2, ge=1, le=256,
+        description="Solves running at once in each worker. The GIL lets one run Python at a time, so "
+        "more threads add contention, not speed; the second keeps one slow solve from stalling the worker. "
+        "Scale with --workers (one per core).",
     )
     cameras: dict[str, CameraSpec] = Field(
         default_factory=dict, description="Named cameras (JSON: name -> camera spec, mounting optional)."

@@ -93,7 +93,9 @@ class _Frames:
                     frame_id = obj["id"]
                 if isinstance(obj, dict) and obj.get("type") == "config":
                     kind = "config"
-                    return self._configure(obj)
+                    ack = self._configure(obj)
+                    self.solver.metrics.ws_frames[kind] += 1
+                    return ack
                 sol = await self._centroids(SolveRequest.model_validate(obj))
         except (SkyfixError, ValidationError, ApiError) as exc:
             self.solver.metrics.ws_frames[f"{kind}_error"] += 1

@@ -63,7 +63,10 @@ class ServerProcess:
         deadline = time.monotonic() + START_TIMEOUT_S
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
-                raise RuntimeError(f"server exited with {self.proc.returncode} (log: {self.log})")
+                code = self.proc.returncode
+                self.kill()
+                tail = self.log.read_text(errors="replace")[-1500:] if self.log else ""
+                raise RuntimeError(f"server exited with {code}:\n{tail}")
             try:
                 if httpx.get(self.url + "/v1/health", timeout=1.0).status_code == 200:
                     return self

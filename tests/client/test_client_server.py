@@ -108,3 +108,21 @@ def test_api_key(db_path: Path, tmp_path: Path, sim_frames: list[RecordedFrame])
         assert info.value.status == 403
     finally:
         srv.kill()
+
+
+def test_images_over_rest_and_stream(server: ServerProcess) -> None:
+    from .conftest import REAL
+
+    tiff = REAL / "tetra3" / "2019-07-29T204726_Alt40_Azi-135_Try1.tiff"
+    if not tiff.is_file():
+        pytest.skip("real images not found")
+    cam = {"width": 1024, "height": 768, "fov_deg": 11.425}
+    with Client(server.url) as sky:
+        rest = sky.solve_image(tiff, camera=cam, id="t1")
+        with sky.stream(camera=cam) as stream:
+            streamed = stream.solve({"id": "c", "camera": cam, "centroids": [[1, 2], [30, 40], [500, 600]]})
+            stream.send_image(tiff.read_bytes(), id="t2")
+            ws = stream.recv()
+    assert rest.status == "solved" and rest.id == "t1" and len(rest.stars) >= 5
+    assert streamed.id == "c" and ws.id == "t2" and ws.status == "solved"
+    assert ws.quaternion == pytest.approx(rest.quaternion, abs=1e-9)

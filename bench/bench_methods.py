@@ -96,6 +96,8 @@ def paper_summary(method: str, preset: str) -> tuple[str, str]:
 
 def run(args: argparse.Namespace) -> int:
     info = machine_info()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     cameras = list(PRESETS) if args.camera == ["all"] else args.camera
     sweeps = list(SWEEPS) if args.sweep == ["all"] else args.sweep
     wanted = method_names() if not args.methods else args.methods
@@ -104,8 +106,13 @@ def run(args: argparse.Namespace) -> int:
     cmd = "python -m bench.bench_methods " + " ".join(sys.argv[1:])
     for cam in cameras:
         preset = PRESETS[cam]
-        print(f"[{cam}] building the database for {', '.join(wanted)}", flush=True)
-        dbpath, dbrep = build_skyfix_db(preset, wanted, Path(args.db_dir) / cam, reuse=args.reuse_db)
+        if args.db:
+            dbpath = Path(args.db)
+            dbrep = common.DbReport("skyfix", cam, str(dbpath), None, common.dir_bytes(dbpath), None,
+                                    note=f"given database {dbpath}")
+        else:
+            print(f"[{cam}] building the database for {', '.join(wanted)}", flush=True)
+            dbpath, dbrep = build_skyfix_db(preset, wanted, Path(args.db_dir) / cam, reuse=args.reuse_db)
         db = open_database(dbpath)
         methods = [m for m in wanted if m in db.methods]
         skipped = {m: dbrep.failed.get(m, "not in the database") for m in wanted if m not in methods}
@@ -140,14 +147,15 @@ def run(args: argparse.Namespace) -> int:
                     for s in solvers[k:] + solvers[:k]:
                         a = s.solve(f.centroids, preset.camera, scen.noise_px)
                         judged[s.method].append(judge(a, f.quaternion, hip, f.blends))
+                sparse = sum(int((f.hip >= 0).sum()) < 4 for f in frames)
                 for m, js in judged.items():
                     st = summarize(js)
-                    rows.append({"method": m, "value": scen.value, "scenario": scen.label, **st})
+                    rows.append({"method": m, "value": scen.value, "scenario": scen.label, "sparse": sparse, **st})
                 line = "  ".join(f"{m} {fmt(r['rate'], 1, pct=True)} {r['wrong']}w {fmt(r['ms_median'])}ms"
                                  for m, r in ((r["method"], r) for r in rows if r["value"] == scen.value))
                 print(f"[{cam} {sweep} {scen.value:g}] {line}", flush=True)
             md = render(cam, sweep, rows, nosol, dbrep, skipped, args, info, cmd, time.time() - t_start)
-            stem = OUT / f"methods-{cam}-{sweep}"
+            stem = out / f"methods-{cam}-{sweep}"
             stem.parent.mkdir(parents=True, exist_ok=True)
             stem.with_suffix(".md").write_text(md)
             data = {"camera": cam, "sweep": sweep, "rows": rows, "no_solution": nosol, "db": dbrep.__dict__,
@@ -158,8 +166,8 @@ def run(args: argparse.Namespace) -> int:
                 plot(stem.with_suffix(".png"), cam, sweep, rows)
             report.append(md)
             print(f"wrote {stem}.md/.json/.png", flush=True)
-    (OUT / "methods.md").write_text("\n\n".join(report))
-    write_json(OUT / "methods.json", everything)
+    (out / "methods.md").write_text("\n\n".join(report))
+    write_json(out / "methods.json", everything)
     return 0
 
 
@@ -197,10 +205,10 @@ def render(cam: str, sweep: str, rows: list[dict[str, Any]], nosol: dict[str, An
             f"on disk, `open_database` {fmt(dbrep.open_ms)} ms (median of 5, page cache warm). "
             + (f"Skipped: {', '.join(f'{k} ({v})' for k, v in skipped.items())}." if skipped else ""), ""]
     head = ["method", sw.label, "right %", "paper", "solved %", "wrong", "cross-boresight err median \"",
-            "median ms", "p95 ms"]
+            "median ms", "p95 ms", "frames with < 4 stars"]
     body = [[r["method"], f"{r['value']:g}", fmt(r["rate"], 2, True), paper_cell(r["method"], sweep, r["value"], cam),
              fmt(r["solved_rate"], 2, True), r["wrong"], fmt(r["cross_arcsec_median"], 1), fmt(r["ms_median"]),
-             fmt(r["ms_p95"])] for m in methods for r in rows if r["method"] == m]
+             fmt(r["ms_p95"]), r.get("sparse", "-")] for m in methods for r in rows if r["method"] == m]
     out += [md_table(head, body), ""]
     return "\n".join(out)
 
@@ -251,6 +259,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--db-dir", default=str(OUT / "db"), help="where the benchmark databases are built")
     ap.add_argument("--reuse-db", action="store_true", help="keep a database built by an earlier run")
+    ap.add_argument("--db", default=None, help="use this database (one camera); methods it lacks are skipped")
+    ap.add_argument("--out", default=str(OUT), help="output directory (default bench/out)")
     ap.add_argument("--no-plot", action="store_true")
     args = ap.parse_args(argv)
     args.camera = args.camera.split(",")

@@ -1,0 +1,115 @@
+"""Smoke tests: each benchmark runs end to end on a handful of frames, so the scripts can't rot.
+
+The peers are optional (``pip install -e '.[bench]'`` for tetra3rs; ``python -m
+bench.peers.cedar setup`` for cedar-solve's own venv): their tests skip when a peer is absent.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench import common
+from bench import bench_methods, bench_peers
+from service.core.navdb import build_database
+from service.core.presets import PRESETS
+
+
+@pytest.fixture(scope="module")
+def maxangle_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("benchdb") / "seed000"
+    build_database(path, PRESETS["seed000"].build_config(("maxangle",)))
+    return path
+
+
+def test_scenarios_cover_the_sweeps() -> None:
+    noise = common.scenarios("seed000", "noise")
+    assert [s.value for s in noise] == [0.25 * i for i in range(9)]
+    assert all(s.false_stars == 2 and s.mag_noise == 0 for s in noise)
+    false = common.scenarios("seed003", "false")
+    assert [s.false_stars for s in false] == [0, 1, 2, 3, 4, 5]
+    mag = common.scenarios("seed004", "magnoise")
+    assert mag[-1].mag_noise == 1.0 and mag[-1].false_stars == 2
+    a, b = (s.frames(2, 7) for s in (noise[4], noise[4]))
+    assert np.array_equal(a[0].centroids.xy, b[0].centroids.xy)  # same frames for every solver
+
+
+def test_judge_counts_wrong_answers() -> None:
+    f = common.scenarios("seed000", "noise", [0.0])[0].frames(1, 3)[0]
+    hip = f.hip.tolist()
+    right = common.Answer(True, 1.0, f.quaternion.tolist(), [(i, h) for i, h in enumerate(hip) if h >= 0])
+    assert not common.judge(right, f.quaternion, hip).wrong
+    false_idx = hip.index(-1)
+    paired = common.Answer(True, 1.0, f.quaternion.tolist(), [(false_idx, 1)])
+    assert common.judge(paired, f.quaternion, hip).wrong_star
+    w, x, y, z = f.quaternion
+    turned = common.Answer(True, 1.0, [x, -w, z, -y], None)  # 180 deg about camera x
+    assert common.judge(turned, f.quaternion, hip).wrong_attitude
+    s = common.summarize([common.judge(right, f.quaternion, hip), common.judge(turned, f.quaternion, hip),
+                          common.judge(common.Answer(False, 2.0), f.quaternion, hip)])
+    assert s["frames"] == 3 and s["right"] == 1 and s["wrong"] == 1 and math.isclose(s["ms_median"], 1.0)
+
+
+def test_bench_methods_smoke(tmp_path: Path, maxangle_db: Path) -> None:
+    rc = bench_methods.main(["--camera", "seed000", "--sweep", "noise", "--values", "0.5,2", "--frames", "4",
+                             "--no-solution", "2", "--methods", "maxangle,nosuchmethod", "--db", str(maxangle_db),
+                             "--no-plot", "--out", str(tmp_path)])
+    assert rc == 0
+    data = json.loads((tmp_path / "methods-seed000-noise.json").read_text())
+    methods = {r["method"] for r in data["rows"]}
+    assert methods == {"maxangle"}
+    assert "nosuchmethod" in data["skipped"]
+    assert all(r["wrong"] == 0 for r in data["rows"])
+    assert data["no_solution"]["maxangle"]["solved"] == 0
+    md = (tmp_path / "methods-seed000-noise.md").read_text()
+    assert "| maxangle |" in md and "98.08%" in md
+
+
+def test_bench_peers_smoke(tmp_path: Path) -> None:
+    pytest.importorskip("tetra3rs")
+    rc = bench_peers.main(["--camera", "seed000", "--sweep", "false", "--values", "1", "--frames", "3",
+                           "--skyfix", "maxangle", "--peers", "tetra3rs,tetra3rs-0.002", "--no-real", "--no-plot",
+                           "--out", str(tmp_path), "--db-dir", str(tmp_path / "db")])
+    assert rc == 0
+    data = json.loads((tmp_path / "peers.json").read_text())
+    (row,) = data["sweeps"]
+    assert set(row["solvers"]) == {"skyfix maxangle", "tetra3rs", "tetra3rs tol 0.002"}
+    assert row["solvers"]["skyfix maxangle"]["wrong"] == 0
+    assert "skyfix maxangle" in row["ratio"]
+    assert "tetra3rs" in (tmp_path / "peers.md").read_text()
+
+
+def test_cedar_worker_smoke(tmp_path: Path) -> None:
+    from bench.peers import StarRows, cedar
+
+    ok, why = cedar.available()
+    if not ok:
+        pytest.skip(why)
+    from service.core.catalog import load_hipparcos, select_stars
+
+    cam = PRESETS["seed004"].camera  # 20 deg: the smallest cedar database, a few seconds
+    rows = StarRows.from_table(select_stars(load_hipparcos(), epoch=2026.0, mag_limit=5.0))
+    worker = cedar.CedarWorker()
+    try:
+        rep = worker.prepare("smoke", rows, cam.fov_deg, None, 5.0, tmp_path, reuse=False)
+        assert rep.build_s and rep.open_ms
+        solver = cedar.CedarSolver(worker)
+        frames = common.simulate_frames(cam, 3, common.SimConfig(mag_limit=5.0), rng=1)
+        for fr in frames:
+            a = solver.solve(fr.centroids, cam, 0.0)
+            j = common.judge(a, fr.quaternion, fr.hip.tolist(), fr.blends)
+            assert not j.wrong
+    finally:
+        worker.close()
+
+
+@pytest.mark.skipif(not (common.REAL_DIR / "truth.json").is_file(), reason="real images not present")
+def test_real_frames_load() -> None:
+    frames = common.real_frames()
+    assert len(frames) == 38
+    f = frames[0]
+    assert len(f.hip) == len(f.centroids) and len(f.quaternion) == 4

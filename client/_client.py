@@ -201,7 +201,8 @@ class _BaseClient:
     def _delay_after_response(self, failures: int, response: httpx.Response) -> float | None:
         if response.status_code not in self.retry.statuses or failures >= self.retry.attempts:
             return None
-        return self.retry.delay_s(failures, retry_after_s=parse_retry_after(response.headers.get("Retry-After")))
+        retry_after = parse_retry_after(response.headers.get("Retry-After"))
+        return self.retry.delay_s(failures, retry_after_s=retry_after)
 
     @staticmethod
     def _transport_error(exc: httpx.TransportError, url: str, tries: int) -> SkyfixTransportError:
@@ -257,9 +258,11 @@ class Client(_BaseClient):
     """
 
     def __init__(self, base_url: str = DEFAULT_URL, *, api_key: str | None = None,
-                 timeout: float | httpx.Timeout | None = DEFAULT_TIMEOUT_S, retries: Retry | int | None = None,
-                 transport: httpx.BaseTransport | None = None, headers: Mapping[str, str] | None = None) -> None:
-        super().__init__(base_url=base_url, api_key=api_key, timeout=timeout, retries=retries, headers=headers)
+                 timeout: float | httpx.Timeout | None = DEFAULT_TIMEOUT_S,
+                 retries: Retry | int | None = None, transport: httpx.BaseTransport | None = None,
+                 headers: Mapping[str, str] | None = None) -> None:
+        super().__init__(base_url=base_url, api_key=api_key, timeout=timeout, retries=retries,
+                         headers=headers)
         self._http = httpx.Client(base_url=self.base_url, timeout=timeout, transport=transport,
                                   headers=self._headers)
 
@@ -360,10 +363,11 @@ class AsyncClient(_BaseClient):
     """
 
     def __init__(self, base_url: str = DEFAULT_URL, *, api_key: str | None = None,
-                 timeout: float | httpx.Timeout | None = DEFAULT_TIMEOUT_S, retries: Retry | int | None = None,
-                 transport: httpx.AsyncBaseTransport | None = None, headers: Mapping[str, str] | None = None,
-                 max_connections: int = 100) -> None:
-        super().__init__(base_url=base_url, api_key=api_key, timeout=timeout, retries=retries, headers=headers)
+                 timeout: float | httpx.Timeout | None = DEFAULT_TIMEOUT_S,
+                 retries: Retry | int | None = None, transport: httpx.AsyncBaseTransport | None = None,
+                 headers: Mapping[str, str] | None = None, max_connections: int = 100) -> None:
+        super().__init__(base_url=base_url, api_key=api_key, timeout=timeout, retries=retries,
+                         headers=headers)
         limits = httpx.Limits(max_connections=max_connections, max_keepalive_connections=max_connections)
         self._http = httpx.AsyncClient(base_url=self.base_url, timeout=timeout, transport=transport,
                                        headers=self._headers, limits=limits)

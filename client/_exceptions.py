@@ -78,7 +78,8 @@ class SkyfixFrameError(SkyfixClientError):
     server gives one).
     """
 
-    def __init__(self, frame_id: Any, detail: str, field: str | None = None, status: int | None = None) -> None:
+    def __init__(self, frame_id: Any, detail: str, field: str | None = None,
+                 status: int | None = None) -> None:
         self.frame_id = frame_id
         self.detail = detail
         self.field = field

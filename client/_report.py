@@ -129,7 +129,7 @@ class ReplayReport(BaseModel):
     throughput_fps: float = Field(description="Answered frames per second of wall time.")
     wall_s: float
     reconnects: int = 0
-    failures: list[dict[str, Any]] = Field(default_factory=list, description="[{id, error}] per failed frame.")
+    failures: list[dict[str, Any]] = Field(default_factory=list, description="[{id, error}] per failed frame")
     bars: dict[str, Any] = Field(default_factory=dict)
     per_frame: list[FrameReport] = Field(default_factory=list)
 

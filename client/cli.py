@@ -85,7 +85,7 @@ def render_table(report: ReplayReport) -> Table:
 def replay(
     recording: Annotated[Path, typer.Argument(help="Recording (JSON Lines, one frame a line).")],
     url: Annotated[str, typer.Option(help="Server base URL.", envvar="SKYFIX_URL")] = DEFAULT_URL,
-    ws: Annotated[bool, typer.Option("--ws", help="Stream frames over the WebSocket instead of REST.")] = False,
+    ws: Annotated[bool, typer.Option("--ws", help="Stream over the WebSocket instead of REST.")] = False,
     rate: Annotated[float | None, typer.Option(help="Frames per second (default: as fast as possible).",
                                                min=0.001)] = None,
     concurrency: Annotated[int, typer.Option(help="Frames in flight at once (REST requests, or the WebSocket "
@@ -93,15 +93,16 @@ def replay(
     api_key: Annotated[str | None, typer.Option(help="Server API key (prefer the SKYFIX_API_KEY environment "
                                                      "variable: a command line is visible to ps).",
                                                 envvar="SKYFIX_API_KEY", show_envvar=True)] = None,
-    report: Annotated[Path | None, typer.Option(help="Write the full report (with every frame) as JSON.")] = None,
+    report: Annotated[Path | None, typer.Option(help="Write the full report, every frame, as JSON.")] = None,
     min_rate: Annotated[float | None, typer.Option(help="Fail (exit 1) below this identification rate, 0-1.",
                                                    min=0.0, max=1.0)] = None,
     max_wrong: Annotated[int | None, typer.Option(help="Fail (exit 1) above this many wrong answers.",
                                                   min=0)] = None,
-    aem: Annotated[Path | None, typer.Option(help="Write the solved attitudes as a CCSDS AEM (ADM v2, KVN).")] = None,
+    aem: Annotated[Path | None, typer.Option(help="Write the solved attitudes as a CCSDS AEM.")] = None,
     method: Annotated[str, typer.Option(help="Identification method, or 'auto'.")] = "auto",
-    wrong_arcsec: Annotated[float, typer.Option(help="Cross-boresight error above which a solved frame is "
-                                                     "wrong, arcsec.", min=0.0)] = WRONG_CROSS_BORESIGHT_ARCSEC,
+    wrong_arcsec: Annotated[float, typer.Option(
+        help="Cross-boresight error above which a solved frame is wrong, arcsec.", min=0.0,
+    )] = WRONG_CROSS_BORESIGHT_ARCSEC,
     wrong_roll_arcsec: Annotated[float, typer.Option(help="Roll error above which a solved frame is wrong, "
                                                           "arcsec.", min=0.0)] = WRONG_ROLL_ARCSEC,
     timeout: Annotated[float, typer.Option(help="Seconds to wait for each answer.", min=0.001)] = 30.0,
@@ -122,8 +123,9 @@ def replay(
         raise typer.Exit(EXIT_USAGE) from None
     bars = WrongBars(cross_boresight_arcsec=wrong_arcsec, roll_arcsec=wrong_roll_arcsec)
     policy = Retry(attempts=retries + 1)
-    with Progress(TextColumn("[bold]replay"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.description}"),
-                  TimeElapsedColumn(), console=err, disable=quiet, transient=False) as progress:
+    columns = (TextColumn("[bold]replay"), BarColumn(), MofNCompleteColumn(),
+               TextColumn("{task.description}"), TimeElapsedColumn())
+    with Progress(*columns, console=err, disable=quiet, transient=False) as progress:
         task = progress.add_task("", total=len(frames))
         counts = {"solved": 0, "no_solution": 0, "failed": 0}
 
@@ -135,7 +137,8 @@ def replay(
         try:
             result = asyncio.run(replay_frames(
                 frames, url=url, recording=recording, ws=ws, rate_hz=rate, concurrency=concurrency,
-                api_key=api_key, timeout=timeout, retries=policy, method=method, bars=bars, on_result=on_result))
+                api_key=api_key, timeout=timeout, retries=policy, method=method, bars=bars,
+                on_result=on_result))
         except KeyboardInterrupt:
             progress.stop()
             err.print("[yellow]skyfix replay:[/] interrupted")

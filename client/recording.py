@@ -83,7 +83,8 @@ def read_recording(path: str | os.PathLike[str]) -> Iterator[RecordedFrame]:
 def _check_frame(frame: RecordedFrame, base: Path, where: str, line: int) -> None:
     given = [frame.centroids is not None, frame.image is not None, frame.cameras is not None]
     if sum(given) != 1:
-        raise RecordingError("a frame needs exactly one of centroids, image or cameras", path=where, line=line)
+        raise RecordingError("a frame needs exactly one of centroids, image or cameras",
+                             path=where, line=line)
     if frame.cameras is None and frame.camera is None and frame.image is None:
         raise RecordingError("a centroid frame needs a camera", path=where, line=line)
     rows = list(frame.centroids or []) + [r for cam in frame.cameras or [] for r in cam.centroids]

@@ -141,7 +141,8 @@ async def _replay_rest(run: _Run, wire_ids: list[FrameId], recording: Path | Non
                 if recording is None:
                     raise SkyfixClientError("image frames need the recording's path")
                 path = resolve_image(recording, frame.image)
-                result = await client.solve_image(path, camera=frame.camera, id=wire_ids[index], method=method)
+                result = await client.solve_image(path, camera=frame.camera, id=wire_ids[index],
+                                                  method=method)
             else:
                 result = await client.solve(_request(frame, wire_ids[index], method))
         except (SkyfixClientError, OSError, ValueError) as exc:  # ValueError: a frame the API refuses

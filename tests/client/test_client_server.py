@@ -77,7 +77,8 @@ def test_async_client_many_in_flight(server: ServerProcess, sim_frames: list[Rec
     assert sum(r.status == "solved" for r in results) >= 7
 
 
-def test_stream_pipelines_and_survives_a_bad_frame(server: ServerProcess, sim_frames: list[RecordedFrame]) -> None:
+def test_stream_pipelines_and_survives_a_bad_frame(server: ServerProcess,
+                                                   sim_frames: list[RecordedFrame]) -> None:
     with Client(server.url).stream(track=False) as stream:
         for frame in sim_frames[:5]:
             stream.send(request(frame))

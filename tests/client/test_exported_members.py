@@ -31,6 +31,7 @@ def test_exceptions_pickle() -> None:
     import pickle
 
     for exc in (client.SkyfixHTTPError(422, "bad", "camera"), client.SkyfixFrameError("f1", "bad", None, 413),
-                client.SkyfixStreamError("gone", ["a", 2]), client.RecordingError("x", path="r.jsonl", line=3)):
+                client.SkyfixStreamError("gone", ["a", 2]),
+                client.RecordingError("x", path="r.jsonl", line=3)):
         back = pickle.loads(pickle.dumps(exc))
         assert type(back) is type(exc) and str(back) == str(exc) and vars(back) == vars(exc)

@@ -35,7 +35,8 @@ def test_round_trip(tmp_path: Path) -> None:
 
 def test_blank_and_comment_lines_are_skipped(tmp_path: Path) -> None:
     path = tmp_path / "rec.jsonl"
-    path.write_text('# a recording\n\n{"id": 1, "camera": %s, "centroids": [[1, 2]]}\n' % str(CAM).replace("'", '"'))
+    frame = json.dumps({"id": 1, "camera": CAM, "centroids": [[1, 2]]})
+    path.write_text(f"# a recording\n\n{frame}\n")
     assert [f.id for f in read_recording(path)] == [1]
 
 
@@ -77,13 +78,13 @@ def test_writer_refuses_escaping_image(tmp_path: Path) -> None:
     ('{"id": 1}', "exactly one of"),
     ('{"id": 1, "centroids": [[1, 2]]}', "needs a camera"),
     ('{"id": 1, "camera": {"width": 10, "height": 10}, "centroids": [[1, 2]]}', "exactly one of fov_deg"),
-    ('{"id": 1, "camera": %s, "centroids": [[1, 2, 3, 4]]}' % str(CAM).replace("'", '"'), "rows"),
-    ('{"id": 1, "camera": %s, "centroids": [[1, 2]], "truth": {"quaternion": [2, 0, 0, 0]}}'
-     % str(CAM).replace("'", '"'), "unit"),
+    (json.dumps({"id": 1, "camera": CAM, "centroids": [[1, 2, 3, 4]]}), "rows"),
+    (json.dumps({"id": 1, "camera": CAM, "centroids": [[1, 2]], "truth": {"quaternion": [2, 0, 0, 0]}}),
+     "unit"),
 ])
 def test_bad_lines_name_their_line(tmp_path: Path, line: str, message: str) -> None:
     path = tmp_path / "rec.jsonl"
-    path.write_text('{"id": 0, "camera": %s, "centroids": [[1, 2]]}\n%s\n' % (str(CAM).replace("'", '"'), line))
+    path.write_text(json.dumps({"id": 0, "camera": CAM, "centroids": [[1, 2]]}) + f"\n{line}\n")
     with pytest.raises(RecordingError, match=message) as info:
         list(read_recording(path))
     assert info.value.line == 2

@@ -82,7 +82,8 @@ def test_rest_replay_of_simulated_frames(server: ServerProcess, sim_recording: P
 
 def test_ws_replay_at_a_fixed_rate(server: ServerProcess, sim_recording: Path) -> None:
     seen: list[FrameReport] = []
-    report = replay(sim_recording, url=server.url, ws=True, rate_hz=50.0, concurrency=3, on_result=seen.append)
+    report = replay(sim_recording, url=server.url, ws=True, rate_hz=50.0, concurrency=3,
+                    on_result=seen.append)
     check_against_truth(report, sim_recording)
     assert report.transport == "ws" and report.failed == 0 and report.reconnects == 0
     assert report.identification_rate >= 0.95 and report.wrong == 0
@@ -119,8 +120,8 @@ def write_mixed_recording(src: Path, dest: Path) -> None:
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "client.cli", *args, "--quiet"], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120)
+    return subprocess.run([sys.executable, "-m", "client.cli", *args, "--quiet"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
 
 
 def test_cli_report_aem_and_exit_status(server: ServerProcess, sim_recording: Path, tmp_path: Path) -> None:
@@ -158,7 +159,8 @@ def test_cli_nothing_answered(tmp_path: Path, sim_recording: Path) -> None:
 
 
 @pytest.mark.parametrize("ws", [False, True], ids=["rest", "ws"])
-def test_server_killed_mid_run_fails_the_rest(own_server: ServerProcess, sim_recording: Path, ws: bool) -> None:
+def test_server_killed_mid_run_fails_the_rest(own_server: ServerProcess, sim_recording: Path,
+                                              ws: bool) -> None:
     frames = list(read_recording(sim_recording))
 
     def on_result(rep: FrameReport) -> None:
@@ -175,7 +177,8 @@ def test_server_killed_mid_run_fails_the_rest(own_server: ServerProcess, sim_rec
     assert report.identification_rate < 0.75
 
 
-def test_stream_resumes_after_a_restart_without_duplicates(own_server: ServerProcess, sim_recording: Path) -> None:
+def test_stream_resumes_after_a_restart_without_duplicates(own_server: ServerProcess,
+                                                           sim_recording: Path) -> None:
     from client import Client, SolveRequest
 
     frames = list(read_recording(sim_recording))[:20]
@@ -216,11 +219,10 @@ def test_ws_replay_resumes_after_a_restart(own_server: ServerProcess, sim_record
 def test_rig_replay_scores_the_body_attitude(server: ServerProcess, tmp_path: Path) -> None:
     """Two cameras on one body, 90° apart: truth is the body attitude and the HIPs of both
     cameras' centroids, one camera after the other."""
+    from client._attitude import quat_mul
     from service.core.attitude import random_rotations
     from service.core.camera import Camera
     from service.core.sim import SimConfig, simulate_frame
-
-    from client._attitude import quat_mul
 
     camera = Camera.from_fov(12.0, 1024, 768)
     mounts = [(1.0, 0.0, 0.0, 0.0), (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)]  # body -> camera
@@ -235,7 +237,8 @@ def test_rig_replay_scores_the_body_attitude(server: ServerProcess, tmp_path: Pa
                 cams.append({"camera": {**camera.to_spec(), "mounting_quaternion": list(mount)},
                              "centroids": np.column_stack([sim.centroids.xy, sim.centroids.flux]).tolist()})
                 hips += [None if h < 0 else int(h) for h in sim.hip]
-            rec.write({"id": i, "cameras": cams, "truth": {"quaternion": [float(c) for c in q_body], "hip": hips}})
+            truth = {"quaternion": [float(c) for c in q_body], "hip": hips}
+            rec.write({"id": i, "cameras": cams, "truth": truth})
     report = replay(path, url=server.url, concurrency=2)
     check_against_truth(report, path)
     assert report.solved >= 7 and report.wrong == 0 and report.hip_wrong == 0

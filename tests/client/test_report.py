@@ -45,9 +45,10 @@ def result(q: list[float], stars: list[tuple[int, int]]) -> SolveResult:
                   for c, h in stars]})
 
 
-def scored(q: list[float], stars: list[tuple[int, int]], hip: list[int | None], bars: WrongBars = WrongBars()):
+def scored(q: list[float], stars: list[tuple[int, int]], hip: list[int | None],
+           bars: WrongBars | None = None) -> FrameReport:
     rep = FrameReport(index=0, id="f", status="solved")
-    score_frame(rep, frame(hip), result(q, stars), bars)
+    score_frame(rep, frame(hip), result(q, stars), bars or WrongBars())
     return rep
 
 
@@ -97,9 +98,10 @@ def test_rig_truth_lists_cameras_in_order() -> None:
 
 def test_summary_and_bars() -> None:
     frames = [
-        FrameReport(index=0, id="a", status="solved", latency_ms=10, cross_boresight_arcsec=5, roll_arcsec=-50),
-        FrameReport(index=1, id="b", status="solved", latency_ms=20, cross_boresight_arcsec=500, roll_arcsec=10,
-                    wrong=True, reasons=["x"]),
+        FrameReport(index=0, id="a", status="solved", latency_ms=10, cross_boresight_arcsec=5,
+                    roll_arcsec=-50),
+        FrameReport(index=1, id="b", status="solved", latency_ms=20, cross_boresight_arcsec=500,
+                    roll_arcsec=10, wrong=True, reasons=["x"]),
         FrameReport(index=2, id="c", status="no_solution", latency_ms=30),
         FrameReport(index=3, id="d", status="failed", error="ConnectError"),
     ]

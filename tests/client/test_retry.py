@@ -88,7 +88,8 @@ def test_4xx_is_never_retried_and_carries_detail_and_field(status: int) -> None:
     with Client("http://sky", transport=transport, retries=FAST) as c, pytest.raises(SkyfixHTTPError) as info:
         c.solve([[1, 2]], camera=CAM)
     assert len(seen) == 1
-    assert (info.value.status, info.value.detail, info.value.field) == (status, body["detail"], "camera.fov_deg")
+    err = info.value
+    assert (err.status, err.detail, err.field) == (status, body["detail"], "camera.fov_deg")
 
 
 def test_retries_exhausted_returns_the_last_error() -> None:

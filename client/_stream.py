@@ -56,7 +56,9 @@ _FATAL_CLOSE = {1002, 1003, 1007, 1008, 1009, 1010}
 _CONNECT_ERRORS = (OSError, TimeoutError, InvalidHandshake, InvalidURI)
 
 # websockets >= 17.1 wants ``legacy=True`` for a sync connection managed outside a ``with`` block.
-_SYNC_LEGACY = {"legacy": True} if "legacy" in inspect.signature(sync_connect).parameters else {}
+_SYNC_LEGACY: dict[str, Any] = (
+    {"legacy": True} if "legacy" in inspect.signature(sync_connect).parameters else {}
+)
 
 FrameLike = SolveRequest | Mapping[str, Any]
 ImageLike = bytes | str | os.PathLike[str]

@@ -11,8 +11,9 @@ from ..navdb.reader import NavDatabase
 from .base import Matcher, Method, SolveContext
 from .maxangle import MaxAngle
 from .pyramid import Pyramid
+from .triangle import Triangle
 
-_REGISTRY: dict[str, Method] = {m.name: m for m in (MaxAngle(), Pyramid())}
+_REGISTRY: dict[str, Method] = {m.name: m for m in (MaxAngle(), Pyramid(), Triangle())}
 
 AUTO_ORDER: tuple[str, ...] = ("maxangle", "pyramid")
 """``auto`` tries these in order (fastest first, measured by bench/bench_methods.py), skipping

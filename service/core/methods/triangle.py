@@ -1,0 +1,229 @@
+"""``triangle``: Liebe's classic triangle method (the baseline every paper compares against).
+
+Tables: every catalogue star pair closer than ``max_angle_deg`` (the image diagonal), sorted
+by angular separation. Identification: observed triangles of the brightest stars; for each,
+the three sides are looked up in the pair table (``|d_cat - d_obs| <= eps`` on all three),
+the three windows are joined into catalogue triples, the mirror images dropped, and the
+redundant matches resolved by a fourth star: the shared verifier projects each candidate's
+attitude and keeps the one that explains further stars.
+
+Faithful parts and the choices made where the classic is vague:
+
+- **Range index.** Liebe/Mortari use a k-vector (``k[i] = #{y_j <= m i + q}``) to turn a
+  range query on the sorted angles into two table reads. ``build_kvector``/``kvector_range``
+  implement it; measured against ``np.searchsorted`` on the seed-002 table (373k pairs),
+  the k-vector is slower for the 20-60 windows one frame needs (11 us vs 1.6-3 us a batch)
+  and only wins for batches above ~300 windows, so the matcher uses ``searchsorted`` and the
+  database stores no k-vector unless built with ``index="kvector"`` (docs/methods.md).
+- **Triangle order.** The classic takes triangles of the brightest stars in lexicographic
+  order (``order="brightness"``). The default ``order="selective"`` sorts all triangles of the
+  brightest stars by the number of catalogue triples they can match (the product of the three
+  pair-window counts, normalised) and tries the most distinctive first: fewer candidates per
+  triangle, fewer look-elsewhere trials, and a false star spoils a triangle only when it is
+  the most distinctive one. Measured in docs/methods.md.
+- **Sparse fields.** With three stars there is no fourth star. When a frame's triangle
+  matches exactly one catalogue triple, the matcher asks the verifier for the sparse proof
+  (``verify.check_unique_triangle``): the expected number of catalogue triangles, consistent
+  with the frame, inside the box of the measured mismatch, estimated from the pair table.
+"""
+
+from __future__ import annotations
+
+import math
+from itertools import combinations
+from typing import Any
+
+import numpy as np
+
+from ..catalog import StarTable
+from ..geometry import pairwise_angles
+from ..navdb.reader import NavDatabase
+from ..verify import Verified, check_unique_triangle
+from ._pairs import build_pair_table, edge_keys, join_triangles, same_handedness
+from .base import Progress, SolveContext
+
+MAX_CANDIDATES = 64
+"""Triangles matching more catalogue triples than this are skipped as uninformative."""
+SPARSE_MAX_STARS = 4
+"""Frames with at most this many stars may be proven by a unique triangle alone."""
+BOX_START, BOX_MAX, BOX_TARGET = 12.0, 160.0, 2000
+"""Density box (see ``_density_box``): first and largest half-width in pattern tolerances, and
+the number of catalogue triples it aims to hold."""
+
+
+# ---- k-vector (Mortari) ------------------------------------------------------------------
+def build_kvector(y: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """k-vector of sorted values ``y`` ``(M,)``: ``k`` ``(M,)`` int64 with
+    ``k[i] = #{y_j <= m (i + 1) + q}`` and the line ``(m, q)``."""
+    m_len = len(y)
+    if m_len < 2:
+        return np.arange(m_len, dtype=np.int64), 1.0, 0.0
+    eps = 2.2e-16 * max(abs(float(y[0])), abs(float(y[-1])), 1.0)
+    m = (float(y[-1]) - float(y[0]) + 2 * eps) / (m_len - 1)
+    q = float(y[0]) - m - eps
+    k = np.searchsorted(y, m * np.arange(1, m_len + 1) + q, side="right").astype(np.int64)
+    return k, m, q
+
+
+def kvector_range(k: np.ndarray, m: float, q: float, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index ranges ``[start, end)`` of a k-vector holding every value in ``[lo, hi]``
+    (a few extra values at both ends; callers filter by value)."""
+    last = len(k) - 1
+    jb = np.clip(np.floor((np.asarray(lo) - q) / m).astype(np.int64) - 2, 0, last)
+    jt = np.clip(np.ceil((np.asarray(hi) - q) / m).astype(np.int64), 0, last)
+    return k[jb], k[jt]
+
+
+# ---- the method ----------------------------------------------------------------------------
+class Triangle:
+    name = "triangle"
+    summary = "Liebe's classic: star pairs by angle, three sides within tolerance, a fourth star decides"
+
+    def build_tables(
+        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        max_deg = float(params.get("max_angle_deg", config.fov_max_deg))
+        index = str(params.get("index", "searchsorted"))
+        if index not in ("searchsorted", "kvector"):
+            raise ValueError(f"triangle: unknown index {index!r}")
+        progress("star pairs", 0.0)
+        pairs, angles = build_pair_table(stars.vec, math.radians(max_deg))
+        tables = {"pairs": pairs, "angles": angles}
+        meta: dict[str, Any] = {"max_angle_deg": max_deg, "n_pairs": int(len(pairs)), "index": index}
+        if index == "kvector":
+            k, m, q = build_kvector(angles)
+            tables["kvector"] = k
+            meta.update(kvector_m=m, kvector_q=q)
+        progress(f"{len(pairs)} pairs", 1.0)
+        return tables, meta
+
+    def matcher(self, db: NavDatabase) -> TriangleMatcher:
+        return TriangleMatcher(db)
+
+
+class TriangleMatcher:
+    """Triangle matcher over one database; ``order`` is ``"selective"`` or ``"brightness"``."""
+
+    def __init__(self, db: NavDatabase, *, order: str = "selective", sparse: bool = True) -> None:
+        t = db.tables["triangle"]
+        prm = db.method_params("triangle")
+        self.pairs = t["pairs"]
+        self.angles = t["angles"]
+        self.vec = db.stars.vec
+        self.n_stars = len(db.stars)
+        self.max_angle = math.radians(prm["max_angle_deg"])
+        self.kvector = t.get("kvector")
+        self.kv_line = (float(prm.get("kvector_m", 1.0)), float(prm.get("kvector_q", 0.0)))
+        self.order = order
+        self.sparse = sparse
+
+    # -- pair windows --------------------------------------------------------------------
+    def windows(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Row ranges ``[start, end)`` of the pair table with angle in ``[lo, hi]``."""
+        if self.kvector is None:
+            return np.searchsorted(self.angles, lo, side="left"), np.searchsorted(self.angles, hi, side="right")
+        s, e = kvector_range(self.kvector, *self.kv_line, lo, hi)
+        # trim the k-vector's slack by value (a handful of rows at each end)
+        seg = [np.asarray(self.angles[a:b]) for a, b in zip(s, e, strict=True)]
+        start = np.array([a + int(np.count_nonzero(y < x)) for a, y, x in zip(s, seg, lo, strict=True)], np.int64)
+        end = np.array([a + int(np.count_nonzero(y <= x)) for a, y, x in zip(s, seg, hi, strict=True)], np.int64)
+        return start, end
+
+    def _edges(self, start: int, end: int) -> np.ndarray:
+        """Directed catalogue edges of table rows ``[start, end)``, sorted by first star."""
+        p = self.pairs[start:end].astype(np.int64)
+        both = np.concatenate([p, p[:, ::-1]])
+        return both[np.argsort(both[:, 0], kind="stable")]
+
+    def triples(self, v: np.ndarray, eps: float) -> np.ndarray:
+        """Catalogue triples ``(K, 3)`` matching the observed triangle ``v`` ``(3, 3)`` on all
+        three sides within ``eps`` with the same handedness (vertex order kept).
+
+        The join pivots on the vertex opposite the longest side: its two sides have the
+        narrowest pair windows, so the fewest combinations are formed."""
+        d = pairwise_angles(v)
+        p = int(np.argmin([d[1, 2], d[0, 2], d[0, 1]]))  # vertex opposite the longest side
+        q, r = [x for x in range(3) if x != p]
+        sides = np.array([d[p, q], d[p, r], d[q, r]])
+        s, e = self.windows(sides - eps, sides + eps)
+        cand = join_triangles(self._edges(s[0], e[0]), self._edges(s[1], e[1]),
+                              edge_keys(self._edges(s[2], e[2]), self.n_stars), self.n_stars)
+        if len(cand) == 0:
+            return cand
+        out = np.empty_like(cand)
+        out[:, [p, q, r]] = cand
+        return out[same_handedness(self.vec, v, out)]
+
+    # -- identification ------------------------------------------------------------------
+    def _triangle_order(self, d: np.ndarray, n: int, eps: float) -> list[tuple[int, int, int]]:
+        tris = list(combinations(range(n), 3))
+        if self.order == "brightness" or len(tris) <= 1:
+            return tris
+        iu = np.triu_indices(n, 1)
+        s, e = self.windows(d[iu] - eps, d[iu] + eps)
+        count = np.zeros((n, n))
+        count[iu] = np.maximum(e - s, 1)
+        count += count.T
+        # expected triples ~ c_ij c_ik c_jk / N^2 (up to a common factor): most distinctive first
+        cost = [count[i, j] * count[i, k] * count[j, k] for i, j, k in tris]
+        return [tris[r] for r in np.argsort(cost, kind="stable")]
+
+    def identify(self, ctx: SolveContext) -> Verified | None:
+        obs = ctx.obs
+        n = min(len(obs), ctx.max_stars)
+        if n < 3:
+            return None
+        v = obs.vec[:n]
+        d = pairwise_angles(v)
+        eps = ctx.tol_rad
+        unique: list[tuple[np.ndarray, np.ndarray]] = []
+        for i, j, k in self._triangle_order(d, n, eps):
+            if ctx.expired():
+                break
+            sides = (d[i, j], d[i, k], d[j, k])
+            if max(sides) > self.max_angle - eps or min(sides) < 4 * eps:
+                continue
+            idx = np.array([i, j, k])
+            cand = self.triples(v[idx], eps)
+            if len(cand) == 1:
+                unique.append((idx, cand[0]))
+            if len(cand) == 0 or len(cand) > MAX_CANDIDATES:
+                continue
+            found = ctx.verifier.screen_and_check(idx, cand)
+            if found is not None:
+                return found
+        if self.sparse and len(obs) <= SPARSE_MAX_STARS and unique and not ctx.verifier.marginal:
+            return self._sparse(ctx, unique, n, eps)
+        return None
+
+    def _sparse(self, ctx: SolveContext, unique: list[tuple[np.ndarray, np.ndarray]], n: int,
+                eps: float) -> Verified | None:
+        """Prove a 3-4 star frame by a triangle that matched exactly one catalogue triple."""
+        n_looks = math.comb(n, 3)
+        best: Verified | None = None
+        for idx, cat in unique:
+            box = self._density_box(ctx.obs.vec[idx], eps)
+            found = check_unique_triangle(ctx.verifier, idx, cat, box_cands=box[0], box_halfwidth_rad=box[1],
+                                          n_looks=n_looks)
+            if found is None:
+                continue
+            if best is not None and not np.array_equal(np.sort(best.cat), np.sort(found.cat)):
+                return None  # two unique triangles, two different skies: ambiguous
+            if best is None or found.false_prob < best.false_prob:
+                best = found
+        return best
+
+    def _density_box(self, v: np.ndarray, eps: float) -> tuple[np.ndarray, float]:
+        """Catalogue triples in a box of half-width ``W`` around the observed sides: the sample
+        the verifier estimates the local density of consistent triangles from. ``W`` is grown
+        until the box holds about ``BOX_TARGET`` triples (the test's power is set by how many
+        triples it examines), but stays below a quarter of the shortest side, so that the
+        density is smooth across the box."""
+        d = pairwise_angles(v)
+        w_max = min(d[0, 1], d[0, 2], d[1, 2]) / 4
+        w = min(BOX_START * eps, w_max)
+        box = self.triples(v, w)
+        if len(box) < BOX_TARGET / 2 and w < w_max:
+            w = min(w * (BOX_TARGET / max(len(box), 8)) ** (1 / 3), w_max, BOX_MAX * eps)
+            box = self.triples(v, w)
+        return box, w

@@ -1,0 +1,104 @@
+"""triangle (Liebe's classic) on seed 000's camera: the pair index, the triangle look-up, and
+the acceptance bar (>= 99% of 500 frames at 0.5 px, no wrong answer, random points refused)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from service.core.evaluate import score
+from service.core.methods import get_matcher
+from service.core.methods.triangle import TriangleMatcher, build_kvector, kvector_range
+from service.core.navdb import NavDatabase, build_database, open_database
+from service.core.pipeline import SolveOptions, solve
+from service.core.sim import SimConfig, random_points, simulate_frames
+from tests.conftest import SEED000_CAMERA, seed000_config
+
+CAMERA = SEED000_CAMERA
+OPTIONS = SolveOptions(centroid_sigma_px=0.5)
+
+
+@pytest.fixture(scope="module")
+def db(tmp_path_factory: pytest.TempPathFactory) -> NavDatabase:
+    path = tmp_path_factory.mktemp("triangle") / "seed000"
+    build_database(path, seed000_config(("triangle",)))
+    return open_database(path)
+
+
+@pytest.fixture(scope="module")
+def frames():
+    return simulate_frames(CAMERA, 500, SimConfig(mag_limit=6.5, centroid_noise_px=0.5), rng=2000)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(0.0, 0.1, allow_nan=False), min_size=2, max_size=400, unique=True),
+       st.floats(0.0, 0.12), st.floats(0.0, 0.02))
+def test_kvector_range_holds_every_value_in_range(values: list[float], lo: float, width: float) -> None:
+    y = np.sort(np.asarray(values))
+    k, m, q = build_kvector(y)
+    s, e = kvector_range(k, m, q, np.array([lo]), np.array([lo + width]))
+    inside = np.flatnonzero((y >= lo) & (y <= lo + width))
+    assert np.all((inside >= s[0]) & (inside < e[0]))
+
+
+def test_kvector_index_agrees_with_searchsorted(db: NavDatabase) -> None:
+    m = TriangleMatcher(db)
+    k, m_, q = build_kvector(np.asarray(m.angles))
+    mk = TriangleMatcher(db)
+    mk.kvector, mk.kv_line = k, (m_, q)
+    rng = np.random.default_rng(3)
+    lo = rng.uniform(0.0, math.radians(8.0), 50)
+    hi = lo + rng.uniform(0.0, 1e-3, 50)
+    for a, b in zip(m.windows(lo, hi), mk.windows(lo, hi), strict=True):
+        assert np.array_equal(a, b)
+
+
+def test_triples_hold_the_true_triangle(db: NavDatabase) -> None:
+    f = simulate_frames(CAMERA, 1, SimConfig(mag_limit=6.5, centroid_noise_px=0.5), rng=11)[0]
+    row = {int(h): i for i, h in enumerate(db.stars.hip)}
+    v = CAMERA.pixel_to_vector(f.centroids.xy[:3])
+    truth = [row[int(h)] for h in f.hip[:3]]
+    tol = (3 * math.sqrt(2) * 0.5 + 0.5) * CAMERA.pixel_scale_rad
+    cands = get_matcher(db, "triangle").triples(v, tol)
+    assert any(list(c) == truth for c in cands)
+    mirrored = v * np.array([-1.0, 1.0, 1.0])  # a mirror image never matches
+    assert not any(list(c) == truth for c in get_matcher(db, "triangle").triples(mirrored, tol))
+
+
+@pytest.mark.slow
+def test_identifies_99_percent_with_no_wrong_answer(db: NavDatabase, frames) -> None:
+    solved = wrong = 0
+    for f in frames:
+        sol = solve(f.centroids, CAMERA, db, method="triangle", options=OPTIONS)
+        s = score(sol, f.quaternion, f.hip.tolist(), blends=f.blends)
+        solved += s.solved
+        wrong += s.solved and not s.correct
+    assert wrong == 0
+    assert solved >= 0.99 * len(frames)
+
+
+@pytest.mark.slow
+def test_random_points_never_solve(db: NavDatabase) -> None:
+    for i in range(200):
+        pts = random_points(CAMERA, 3 + i % 28, rng=10_000 + i)
+        assert not solve(pts, CAMERA, db, method="triangle", options=OPTIONS).solved
+
+
+def test_classic_brightness_order_solves_too(db: NavDatabase) -> None:
+    classic = TriangleMatcher(db, order="brightness")
+    db.__dict__.setdefault("_matchers", {})
+    saved = db.__dict__["_matchers"].get("triangle")
+    db.__dict__["_matchers"]["triangle"] = classic
+    try:
+        for f in simulate_frames(CAMERA, 20, SimConfig(mag_limit=6.5, centroid_noise_px=0.5, false_stars=1), rng=5):
+            sol = solve(f.centroids, CAMERA, db, method="triangle", options=OPTIONS)
+            assert score(sol, f.quaternion, f.hip.tolist(), blends=f.blends).correct is not False
+    finally:
+        if saved is None:
+            del db.__dict__["_matchers"]["triangle"]
+        else:
+            db.__dict__["_matchers"]["triangle"] = saved

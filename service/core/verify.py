@@ -100,7 +100,7 @@ class Verifier:
     min_matches: int = 4
     trials: int = 0
     patterns: int = 0
-    screen_stars: int = 8
+    screen_stars: int = 6
     marginal: list[Verified] = field(default_factory=list)
     _first_marginal_at: int | None = None
 
@@ -121,44 +121,53 @@ class Verifier:
         return best
 
     def screen_and_check(self, obs_idx: IntArray, cands: IntArray) -> Verified | None:
-        """Test every candidate triple ``cands`` ``(K, 3)`` for the observed triangle
-        ``obs_idx`` at once, then fully verify the promising ones, best first.
-
-        The screen fits each candidate's attitude by TRIAD (vectorised over K), predicts the
-        ICRS direction of up to ``screen_stars`` other observed stars and counts those with a
-        catalogue star within the match radius (one k-d tree query for all). Every candidate
-        counts as a trial in the coincidence bound.
-        """
-        obs_idx = np.asarray(obs_idx, dtype=np.int64)
+        """Test every candidate triple ``cands`` ``(K, 3)`` for one observed triangle
+        ``obs_idx`` (see :meth:`screen_and_check_many`)."""
         cands = np.asarray(cands, dtype=np.int64).reshape(-1, 3)
-        self.patterns += 1
+        tris = np.broadcast_to(np.asarray(obs_idx, dtype=np.int64), cands.shape)
+        return self.screen_and_check_many(tris, cands, n_patterns=1)
+
+    def screen_and_check_many(self, obs_tris: IntArray, cands: IntArray, *, n_patterns: int) -> Verified | None:
+        """Screen candidate matches of several observed triangles at once, then fully verify
+        the promising ones, best first.
+
+        ``obs_tris[k]`` (observed rows) is hypothesised to be catalogue rows ``cands[k]``.
+        The screen fits every candidate's attitude (batched SVD), predicts the ICRS direction
+        of the brightest other observed stars and counts those with a catalogue star within
+        1.5 match radii (one k-d tree query for all). Every candidate counts as a trial in the
+        coincidence bound; ``n_patterns`` observed patterns were tried.
+        """
+        obs_tris = np.asarray(obs_tris, dtype=np.int64).reshape(-1, 3)
+        cands = np.asarray(cands, dtype=np.int64).reshape(-1, 3)
+        self.patterns += n_patterns
         if len(cands) == 0:
             return None
-        self.trials += len(cands) - 1  # check() adds the last one
-        others = np.setdiff1d(np.arange(min(len(self.obs), len(obs_idx) + self.screen_stars + 3)), obs_idx)
-        others = others[: self.screen_stars]
-        if len(others) == 0:
-            order = np.arange(len(cands))
-        else:
-            hits = self._screen(obs_idx, cands, others)
-            order = np.argsort(-hits, kind="stable")
+        self.trials += len(cands) - 1  # check() counts the last one
+        others = np.arange(min(len(self.obs), self.screen_stars + 3))
+        hits = self._screen(obs_tris, cands, others)
+        order = np.argsort(-hits, kind="stable")
+        if len(self.obs) > 3:
             order = order[hits[order] >= 1]
         for row in order[:8]:
-            found = self.check(obs_idx, cands[row])
+            found = self.check(obs_tris[row], cands[row])
             if found is not None:
                 return found
         return None
 
-    def _screen(self, obs_idx: IntArray, cands: IntArray, others: IntArray) -> IntArray:
+    def _screen(self, obs_tris: IntArray, cands: IntArray, others: IntArray) -> IntArray:
+        """Hits per candidate: ``others`` (observed rows not in its triangle) that land near a
+        catalogue star under the candidate's attitude."""
         stars = self.db.stars.vec
-        o = _triad_frames(self.obs.vec[obs_idx[0]][None, :], self.obs.vec[obs_idx[1]][None, :])[0]  # (3, 3)
-        c = _triad_frames(stars[cands[:, 0]], stars[cands[:, 1]])  # (K, 3, 3)
+        o = triangle_frames(self.obs.vec[obs_tris])  # (K, 3, 3)
+        c = triangle_frames(stars[cands])
         # v_obs = O C^T v_icrs, so v_icrs = C O^T v_obs
-        local = self.obs.vec[others] @ o  # (m, 3): O^T v
-        pred = np.einsum("kij,mj->kmi", c, local)  # (K, m, 3)
-        radius = self.match_radius_px * self.obs.pixel_scale_rad
+        local = np.einsum("kji,mj->kmi", o, self.obs.vec[others])  # O^T v, (K, m, 3)
+        pred = np.einsum("kij,kmj->kmi", c, local)  # (K, m, 3)
+        radius = 1.5 * self.match_radius_px * self.obs.pixel_scale_rad
         dist, _ = star_tree(self.db).query(pred.reshape(-1, 3), k=1, distance_upper_bound=radius)
-        return np.isfinite(dist).reshape(len(cands), len(others)).sum(axis=1)
+        near = np.isfinite(dist).reshape(len(cands), len(others))
+        own = (obs_tris[:, :, None] == others[None, None, :]).any(axis=1)
+        return (near & ~own).sum(axis=1)
 
     def check(self, obs_idx: IntArray, cat_idx: IntArray, *, n_trials: int | None = None) -> Verified | None:
         """Verify a hypothesis pairing ``obs_idx`` rows with catalogue rows ``cat_idx``.
@@ -184,6 +193,11 @@ class Verifier:
             return None
         r = wahba_svd(obs.vec[m_obs], stars[m_cat])
         m_obs, m_cat, p_single = self._match_all(r)
+        for _ in range(3):  # a compact hypothesis in a wide field: refit while the matches grow
+            grown = self._match_all(wahba_svd(obs.vec[m_obs], stars[m_cat]))
+            if len(grown[0]) <= len(m_obs):
+                break
+            m_obs, m_cat, p_single = grown
         hyp = np.isin(m_obs, obs_idx)
         n_extra = int(len(m_obs) - hyp.sum())
         n_free = len(obs) - len(obs_idx)
@@ -253,13 +267,27 @@ def star_tree(db: NavDatabase) -> cKDTree:
     return cache["tree"]
 
 
-def _triad_frames(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Orthonormal frames ``(K, 3, 3)`` (columns t1, t2, t3) from vector pairs ``(K, 3)``."""
-    t1 = a / np.linalg.norm(a, axis=1, keepdims=True)
-    t2 = cross(a, b)
+def triangle_frames(tri: FloatArray) -> FloatArray:
+    """Orthonormal frames ``(K, 3, 3)`` (columns) of star triangles ``(K, 3, 3)``: first axis
+    the triangle's mean direction, second towards its first vertex. Two frames of the same
+    triangle seen in two coordinate systems give the rotation between them, with errors
+    averaged over the three stars (TRIAD anchored on one star is ~3x worse far from it)."""
+    t1 = tri.sum(axis=1)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = cross(t1, tri[:, 0])
     t2 /= np.linalg.norm(t2, axis=1, keepdims=True)
     t3 = cross(t1, t2)
     return np.stack([t1, t2, t3], axis=2)
+
+
+def batch_wahba(obs: FloatArray, ref: FloatArray) -> FloatArray:
+    """Rotations ``(K, 3, 3)`` best mapping ``ref[k]`` onto ``obs[k]`` (both ``(K, n, 3)``):
+    Wahba's problem by SVD, vectorised over K."""
+    b = np.einsum("kia,kib->kab", obs, ref)
+    u, _, vt = np.linalg.svd(b)
+    d = np.sign(np.linalg.det(u) * np.linalg.det(vt))
+    u[:, :, 2] *= d[:, None]
+    return u @ vt
 
 
 # ---- sparse fields: a uniquely matched triangle as its own proof ----------------------------

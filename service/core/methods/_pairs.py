@@ -86,3 +86,13 @@ def same_handedness(vec: np.ndarray, tri_obs: np.ndarray, cand: np.ndarray) -> n
     va, vb, vc = vec[cand[:, 0]], vec[cand[:, 1]], vec[cand[:, 2]]
     s = np.einsum("ij,ij->i", va, cross(vb, vc))
     return np.sign(s) == s_obs
+
+
+def same_handedness_many(vec: np.ndarray, obs: np.ndarray, obs_tris: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """Like :func:`same_handedness` for many observed triangles: ``obs_tris[k]`` (rows of the
+    observed vectors ``obs``) against catalogue triple ``cand[k]``."""
+    oa, ob, oc = obs[obs_tris[:, 0]], obs[obs_tris[:, 1]], obs[obs_tris[:, 2]]
+    va, vb, vc = vec[cand[:, 0]], vec[cand[:, 1]], vec[cand[:, 2]]
+    s_obs = np.einsum("ij,ij->i", oa, cross(ob, oc))
+    s_cat = np.einsum("ij,ij->i", va, cross(vb, vc))
+    return np.sign(s_obs) == np.sign(s_cat)

@@ -32,7 +32,7 @@ from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
 from ..verify import Verified
-from ._pairs import build_pair_table, pattern_order, same_handedness
+from ._pairs import build_pair_table, pattern_order, same_handedness_many
 from .base import Progress, SolveContext
 
 THETA_LO = math.pi / 3
@@ -139,28 +139,70 @@ class MaxAngleMatcher:
         self.xi = math.radians(prm["xi_deg"])
         self.vec = db.stars.vec
 
-    def _block(self, theta: float) -> int:
-        return min(max(int(self.n_blocks * (theta - THETA_LO) / THETA_SPAN), 0), self.n_blocks - 1)
+    def observed_triangles(self, d: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Usable triangles of the observed stars with pairwise angles ``d`` ``(n, n)``, best
+        conditioned (smallest theta tolerance) first, with near-tie relabellings.
 
-    def query(self, a: float, b: float, c: float, eps: float) -> np.ndarray:
-        """Record rows matching an observed triangle with sides ``a >= b >= c`` (radians)."""
-        theta = float(triangle_features(np.array(a), np.array(b), np.array(c)))
-        # |d theta / d side| from the law of cosines, summed over the three sides
-        s = max(math.sin(theta), 1e-3)
-        da = a / (b * c * s)
-        db_ = abs(c - b * math.cos(theta)) / (b * c * s)
-        dc = abs(b - c * math.cos(theta)) / (b * c * s)
-        tol_t = eps * (da + db_ + dc)
-        blocks = np.arange(self._block(theta - tol_t), self._block(theta + tol_t) + 1)
+        Returns ``labels`` (T, 3) observed rows as (max, sec, thi) vertices, ``sides`` (T, 3)
+        ``a >= b >= c`` radians, ``theta`` (T,) and its tolerance ``tol`` (T,).
+        """
+        n = len(d)
+        tri = _pattern_array(n)
+        i, j, k = tri[:, 0], tri[:, 1], tri[:, 2]
+        sides, labels = _sorted_sides(d[j, k], d[i, k], d[i, j], i, j, k)
+        a, b, c = sides[:, 0], sides[:, 1], sides[:, 2]
+        theta = triangle_features(a, b, c)
+        ok = (a <= self.d_max - eps) & (c >= self.xi + eps) & (c >= 4 * eps) & (theta <= THETA_MAX_USABLE)
+        sides, labels, theta = sides[ok], labels[ok], theta[ok]
+        order = np.arange(len(theta), dtype=np.float64)
+        # noise may swap which vertex is ID_max / ID_sec (a ~ b) or ID_sec / ID_thi (b ~ c)
+        ab = sides[:, 0] - sides[:, 1] < 2 * eps
+        extra_l = [labels, labels[ab][:, [1, 0, 2]]]
+        extra_o = [order, order[ab] + 0.25]
+        bc = sides[:, 1] - sides[:, 2] < 2 * eps
+        extra_l += [labels[bc][:, [0, 2, 1]], labels[ab & bc][:, [1, 2, 0]]]
+        extra_o += [order[bc] + 0.5, order[ab & bc] + 0.75]
+        src = np.concatenate([np.arange(len(theta))[m] for m in (np.ones(len(theta), bool), ab, bc, ab & bc)])
+        labels = np.concatenate(extra_l)
+        keyorder = np.argsort(np.concatenate(extra_o), kind="stable")
+        labels, src = labels[keyorder], src[keyorder]
+        sides, theta = sides[src], theta[src]
+        a, b, c = sides[:, 0], sides[:, 1], sides[:, 2]
+        sn = np.maximum(np.sin(theta), 1e-3)
+        cs = np.cos(theta)
+        tol = eps * (a + np.abs(c - b * cs) + np.abs(b - c * cs)) / (b * c * sn)  # |d theta / d side| summed
+        # the paper's advice, made quantitative: best-conditioned triangles first (the
+        # tolerance on theta_max sets how many catalogue triangles a query returns)
+        first = np.argsort(tol, kind="stable")
+        return labels[first], sides[first], theta[first], tol[first]
+
+    def query_many(self, sides: np.ndarray, theta: np.ndarray, tol: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+        """Record rows matching each observed triangle; returns ``(rows, which)`` with
+        ``which`` the index of the observed triangle of each row."""
+        blk_lo = np.clip((self.n_blocks * (theta - tol - THETA_LO) / THETA_SPAN).astype(np.int64), 0, self.n_blocks - 1)
+        blk_hi = np.clip((self.n_blocks * (theta + tol - THETA_LO) / THETA_SPAN).astype(np.int64), 0, self.n_blocks - 1)
+        nb = blk_hi - blk_lo + 1
+        t_of_block = np.repeat(np.arange(len(theta)), nb)
+        blocks = blk_lo[t_of_block] + (np.arange(int(nb.sum())) - np.repeat(np.cumsum(nb) - nb, nb))
+        b = sides[t_of_block, 1]
         starts = np.searchsorted(self.key, blocks + (b - eps) / self.b_scale, side="left")
         ends = np.searchsorted(self.key, blocks + (b + eps) / self.b_scale, side="right")
         counts = ends - starts
         total = int(counts.sum())
         if total == 0:
-            return np.zeros(0, np.int64)
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
         rows = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(total)
-        ok = (np.abs(self.c[rows] - c) <= eps) & (np.abs(self.theta[rows] - theta) <= tol_t)
-        return rows[ok]
+        which = np.repeat(t_of_block, counts)
+        c_rec = self.c[rows]
+        th_rec = self.theta[rows]
+        ok = (np.abs(c_rec - sides[which, 2]) <= eps) & (np.abs(th_rec - theta[which]) <= tol[which])
+        rows, which, c_rec, th_rec = rows[ok], which[ok], c_rec[ok], th_rec[ok]
+        # finally all three sides (the paper's check): the longest from b, c and theta_max
+        key = self.key[rows]
+        b_rec = (key - np.floor(key)) * self.b_scale
+        a_rec = np.sqrt(b_rec * b_rec + c_rec * c_rec - 2 * b_rec * c_rec * np.cos(th_rec))
+        ok = np.abs(a_rec - sides[which, 0]) <= eps
+        return rows[ok], which[ok]
 
     def identify(self, ctx: SolveContext) -> Verified | None:
         obs = ctx.obs
@@ -168,33 +210,45 @@ class MaxAngleMatcher:
         if n < 3:
             return None
         v = obs.vec[:n]
-        d = pairwise_angles(v)
         eps = ctx.tol_rad
-        for i, j, k in pattern_order(n):
+        labels, sides, theta, tol = self.observed_triangles(pairwise_angles(v), eps)
+        lo = 0
+        for size in _chunks(len(labels)):
             if ctx.expired():
                 break
-            sides, ids = _sorted_sides(np.array([d[j, k]]), np.array([d[i, k]]), np.array([d[i, j]]),
-                                       np.array([i]), np.array([j]), np.array([k]))
-            a, b, c = sides[0]
-            if a > self.d_max - eps or c < self.xi + eps or c < 4 * eps:
+            sl = slice(lo, lo + size)
+            lo += size
+            rows, which = self.query_many(sides[sl], theta[sl], tol[sl], eps)
+            if len(rows) == 0:
+                ctx.verifier.patterns += size
                 continue
-            if triangle_features(np.array(a), np.array(b), np.array(c)) > THETA_MAX_USABLE:
-                continue
-            o = ids[0]
-            labelings = [(o, (a, b, c))]
-            if a - b < 2 * eps:
-                labelings.append((o[[1, 0, 2]], (a, b, c)))
-            if b - c < 2 * eps:
-                labelings += [(lab[[0, 2, 1]], abc) for lab, abc in list(labelings)]
-            for lab, (sa, sb, sc) in labelings:
-                rows = self.query(sa, sb, sc, eps)
-                if len(rows) == 0:
-                    continue
-                cand = self.ids[rows].astype(np.int64)
-                cand = cand[same_handedness(self.vec, v[lab], cand)]
-                if len(cand) > MAX_CANDIDATES:
-                    continue
-                found = ctx.verifier.screen_and_check(lab.astype(np.int64), cand)
-                if found is not None:
-                    return found
+            lab = labels[sl][which]
+            cand = self.ids[rows].astype(np.int64)
+            keep = same_handedness_many(self.vec, v, lab, cand)
+            # a triangle matching too many catalogue triangles is uninformative: drop it
+            per_tri = np.bincount(which[keep], minlength=size)
+            keep &= per_tri[which] <= MAX_CANDIDATES
+            found = ctx.verifier.screen_and_check_many(lab[keep], cand[keep], n_patterns=size)
+            if found is not None:
+                return found
         return None
+
+
+_PATTERNS: dict[int, np.ndarray] = {}
+
+
+def _pattern_array(n: int) -> np.ndarray:
+    if n not in _PATTERNS:
+        _PATTERNS[n] = np.array(pattern_order(n), dtype=np.int64).reshape(-1, 3)
+    return _PATTERNS[n]
+
+
+def _chunks(total: int) -> list[int]:
+    """Batch sizes over the triangle list: small first (the first triangles usually solve a
+    frame), then doubling, so a hard frame costs few Python round trips."""
+    sizes, size, done = [], 2, 0
+    while done < total:
+        sizes.append(min(size, total - done))
+        done += sizes[-1]
+        size *= 2
+    return sizes

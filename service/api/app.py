@@ -11,7 +11,7 @@ from fastapi import Depends, FastAPI
 
 from .. import __version__
 from ..core.navdb import ensure_default_database, open_database
-from ..core.pipeline import SolveOptions
+from ..core.pipeline import SolveOptions, warm_up
 from . import errors
 from .convert import camera_entry
 from .deps import require_api_key
@@ -28,6 +28,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     s: Settings = app.state.settings
     path = s.db_path or await to_thread.run_sync(ensure_default_database)
     app.state.db = open_database(path)
+    await to_thread.run_sync(warm_up, app.state.db)  # matchers and k-d trees before the first request
     app.state.cameras = {name: camera_entry(spec, f"cameras.{name}") for name, spec in s.cameras.items()}
     app.state.solver = Solver(threads=s.solve_threads, timeout_s=s.solve_timeout_s, metrics=app.state.metrics,
                               options=SolveOptions(timeout_ms=s.search_timeout_ms))

@@ -262,4 +262,16 @@ def tan_wcs(r: np.ndarray, camera: Camera) -> dict[str, Any]:
     }
 
 
-__all__ = ["ARCSEC_PER_RAD", "DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_image", "solve_rig", "tan_wcs"]
+def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
+    """Build every matcher and the star k-d tree of ``db`` (or of each member of a set) now,
+    so the first solve of a server worker is as fast as the rest."""
+    from .verify import star_tree
+
+    members = db.members.values() if isinstance(db, NavDatabaseSet) else [db]
+    for member in members:
+        star_tree(member)
+        for name in member.methods:
+            get_matcher(member, name)
+
+
+__all__ = ["ARCSEC_PER_RAD", "DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_image", "solve_rig", "tan_wcs", "warm_up"]

@@ -48,7 +48,7 @@ from service.core.evaluate import WRONG_BORESIGHT_ARCSEC, attitude_error  # noqa
 from service.core.navdb import BuildConfig, build_database, open_database  # noqa: E402
 from service.core.pipeline import SolveOptions, solve  # noqa: E402
 from service.core.presets import PRESETS, Preset  # noqa: E402
-from service.core.sim import SimConfig, SimFrame, random_points, simulate_frames  # noqa: E402
+from service.core.sim import SimConfig, SimFrame, random_points, simulate_frames  # noqa: E402,F401
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "out"

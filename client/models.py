@@ -71,7 +71,9 @@ class CameraFrame(_Model):
     """One camera's centroids in a multi-camera (rig) request."""
 
     camera: CameraSpec | str = Field(description="Inline camera or the name of one configured on the server.")
-    centroids: list[CentroidRow] = Field(max_length=MAX_CENTROIDS)
+    centroids: list[CentroidRow] = Field(
+        max_length=MAX_CENTROIDS, description="This camera's star centroids, [x, y] or [x, y, flux] px rows."
+    )
 
 
 class AttitudeHint(_Model):
@@ -86,11 +88,22 @@ class SolveRequest(_Model):
     ``cameras`` (one centroid list per camera)."""
 
     id: FrameId = Field(None, description="Echoed back in the result.")
-    camera: CameraSpec | str | None = None
-    centroids: list[CentroidRow] | None = Field(None, max_length=MAX_CENTROIDS)
-    cameras: list[CameraFrame] | None = Field(None, min_length=1, max_length=16)
+    camera: CameraSpec | str | None = Field(
+        None, description="Single camera: inline, or the name of one configured on the server."
+    )
+    centroids: list[CentroidRow] | None = Field(
+        None, max_length=MAX_CENTROIDS,
+        description="Single camera: star centroids, [x, y] or [x, y, flux] rows in pixels (x = column, "
+        "y = row, origin the centre of the top-left pixel); without flux, brightest first.",
+    )
+    cameras: list[CameraFrame] | None = Field(
+        None, min_length=1, max_length=16,
+        description="A rig: one centroid list per camera (instead of camera + centroids).",
+    )
     method: str = Field("auto", max_length=32, description="Identification method, or 'auto'.")
-    attitude_hint: AttitudeHint | None = None
+    attitude_hint: AttitudeHint | None = Field(
+        None, description="Prior attitude (tracking); none = lost in space."
+    )
     epoch: float | None = Field(None, ge=1900, le=2200, description="Decimal year of the observation.")
 
     @model_validator(mode="after")
@@ -118,15 +131,15 @@ class StarResult(BaseModel):
 class SolveResult(BaseModel):
     """A solve's outcome: ``solved`` with attitude and stars, or ``no_solution`` (never a guess)."""
 
-    id: FrameId = None
-    status: Literal["solved", "no_solution"]
+    id: FrameId = Field(None, description="The request's id.")
+    status: Literal["solved", "no_solution"] = Field(description="Identified, or not (never a guess).")
     quaternion: list[float] | None = Field(None, description="ICRS -> camera (or body), [w, x, y, z].")
     ra_deg: float | None = Field(None, description="Boresight right ascension, degrees.")
     dec_deg: float | None = Field(None, description="Boresight declination, degrees.")
     roll_deg: float | None = Field(
         None, description="Position angle of image-up (-y) at the boresight, north through east, [0, 360)."
     )
-    stars: list[StarResult] = Field(default_factory=list)
+    stars: list[StarResult] = Field(default_factory=list, description="The identified stars.")
     rms_arcsec: float | None = Field(None, description="RMS residual of the matched stars, arcsec.")
     false_match_probability: float | None = Field(
         None, description="Upper bound on the probability that the match is a coincidence."
@@ -168,8 +181,10 @@ class RecordedFrame(BaseModel):
 class ErrorResponse(BaseModel):
     """Body of every 4xx/5xx: what is wrong, and where."""
 
-    detail: str
-    field: str | None = None
+    detail: str = Field(description="What is wrong.")
+    field: str | None = Field(
+        None, description="Dotted path of the offending input (centroids.3.1, camera.fov_deg, method)."
+    )
 
 
 # ---- service metadata and the WebSocket stream's control messages ---------------------------
@@ -178,7 +193,7 @@ class ErrorResponse(BaseModel):
 class HealthResponse(BaseModel):
     """``GET /v1/health``: the worker is up and its navigation database is open."""
 
-    status: Literal["ok"] = "ok"
+    status: Literal["ok"] = Field("ok", description="Always ok (a worker that cannot serve does not answer).")
     version: str = Field(description="skyfix version of the server.")
     n_stars: int = Field(description="Navigation stars in the open database.")
     methods: list[str] = Field(description="Methods whose tables the open database holds.")
@@ -199,12 +214,12 @@ class Limits(BaseModel):
 class InfoResponse(BaseModel):
     """``GET /v1/info``: what this server can solve with."""
 
-    version: str
+    version: str = Field(description="skyfix version of the server.")
     database: dict[str, object] = Field(description="The navigation database's manifest (build parameters).")
     methods: list[str] = Field(description="Every registered identification method ('auto' picks one).")
     database_methods: list[str] = Field(description="Methods whose tables the open database holds.")
     cameras: dict[str, CameraSpec] = Field(description="Cameras configured on the server, by name.")
-    limits: Limits
+    limits: Limits = Field(description="Request limits (4xx beyond them).")
 
 
 class StreamConfig(_Model):
@@ -215,13 +230,17 @@ class StreamConfig(_Model):
     """
 
     type: Literal["config"]
-    camera: CameraSpec | str | None = Field(None, description="Camera for image frames: inline or a configured name.")
+    camera: CameraSpec | str | None = Field(
+        None, description="Camera for image frames: inline or a configured name."
+    )
     fov_deg: float | None = Field(
         None, gt=0, lt=180, description="Image frames without a camera: horizontal field of view, degrees."
     )
     method: str | None = Field(None, max_length=32, description="Identification method, or 'auto'.")
     track: bool | None = Field(None, description="Use each solution as the attitude hint of the next frame.")
-    hint_radius_deg: float | None = Field(None, gt=0, le=180, description="Search radius around a tracking hint.")
+    hint_radius_deg: float | None = Field(
+        None, gt=0, le=180, description="Search radius around a tracking hint, degrees."
+    )
 
 
 class StreamAck(BaseModel):
@@ -242,6 +261,8 @@ class StreamError(BaseModel):
     """
 
     id: FrameId = Field(None, description="The frame's id (its message number if it had none).")
-    code: int = Field(description="The HTTP status the same input would get over REST (400, 413, 422, 504...).")
+    code: int = Field(
+        description="The HTTP status the same input would get over REST (400, 413, 422, 504...)."
+    )
     detail: str
     field: str | None = None

@@ -16,6 +16,9 @@ import typer
 from pydantic import ValidationError
 
 APP_FACTORY = "service.api.app:create_app"
+WS_MAX_QUEUE = 4
+"""WebSocket messages uvicorn buffers per connection before it stops reading the socket (TCP
+back-pressure); with images of up to max_image_bytes this bounds a connection's memory."""
 
 
 def serve(
@@ -50,7 +53,8 @@ def serve(
     os.environ.update({"SKYFIX_HOST": settings.host, "SKYFIX_PORT": str(settings.port),
                        "SKYFIX_WORKERS": str(settings.workers), "SKYFIX_DB_PATH": str(path)})
     uvicorn.run(APP_FACTORY, factory=True, host=settings.host, port=settings.port, workers=settings.workers,
-                ws_max_size=settings.ws_max_message_bytes + 1024, ws_per_message_deflate=False,
+                ws_max_size=settings.ws_max_message_bytes + 1024, ws_max_queue=WS_MAX_QUEUE,
+                ws_per_message_deflate=False,
                 log_level=log_level, server_header=False,
                 timeout_graceful_shutdown=10)
 

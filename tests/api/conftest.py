@@ -64,7 +64,8 @@ def start_server(settings: Settings) -> LiveServer:
     sock.bind(("127.0.0.1", 0))
     port = sock.getsockname()[1]
     config = uvicorn.Config(create_app(settings), log_level="warning", lifespan="on",
-                            ws_max_size=settings.ws_max_message_bytes + 1024, ws_per_message_deflate=False)
+                            ws_max_size=settings.ws_max_message_bytes + 1024, ws_per_message_deflate=False,
+                            ws_max_queue=4)
     server = uvicorn.Server(config)
 
     def run() -> None:

@@ -11,9 +11,10 @@ from ..navdb.reader import NavDatabase
 from .base import Matcher, Method, SolveContext
 from .maxangle import MaxAngle
 from .pyramid import Pyramid
+from .radial import Radial
 from .triangle import Triangle
 
-_REGISTRY: dict[str, Method] = {m.name: m for m in (MaxAngle(), Pyramid(), Triangle())}
+_REGISTRY: dict[str, Method] = {m.name: m for m in (MaxAngle(), Pyramid(), Triangle(), Radial())}
 
 AUTO_ORDER: tuple[str, ...] = ("maxangle", "pyramid")
 """``auto`` tries these in order (fastest first, measured by bench/bench_methods.py), skipping

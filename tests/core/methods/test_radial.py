@@ -1,0 +1,96 @@
+"""radial (seed 002) on its paper's camera (4x4 deg, 4096x4096, 7.0 Mv): the packed ring codes,
+the candidate scores, and the acceptance bar.
+
+The camera is sparse: of 500 frames ~2% hold no star, ~11% one or two (nothing to identify)
+and ~10% exactly three (no fourth star to confirm a triangle; the ``triangle`` method's
+sparse-field proof covers those, tests/core/test_sparse.py). The >= 99% bar is therefore
+asserted on the frames with at least four stars; no wrong answer on any frame.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from service.core.evaluate import score
+from service.core.geometry import pairwise_angles
+from service.core.methods import get_matcher
+from service.core.methods.radial import RadialMatcher, ring_codes
+from service.core.navdb import NavDatabase, build_database, open_database
+from service.core.pipeline import SolveOptions, solve
+from service.core.presets import PRESETS
+from service.core.sim import SimConfig, random_points, simulate_frames
+
+PRESET = PRESETS["seed002"]
+CAMERA = PRESET.camera
+OPTIONS = SolveOptions(centroid_sigma_px=0.5)
+TOL = (3 * math.sqrt(2) * 0.5 + 0.5) * CAMERA.pixel_scale_rad
+
+
+@pytest.fixture(scope="module")
+def db(tmp_path_factory: pytest.TempPathFactory) -> NavDatabase:
+    path = tmp_path_factory.mktemp("radial") / "seed002"
+    build_database(path, PRESET.build_config(("radial",)))
+    return open_database(path)
+
+
+@pytest.fixture(scope="module")
+def frames():
+    return simulate_frames(CAMERA, 500, SimConfig(mag_limit=PRESET.mag_limit, centroid_noise_px=0.5), rng=2002)
+
+
+def test_ring_codes_set_one_bit_per_occupied_ring() -> None:
+    pairs = np.array([[0, 1], [0, 2], [1, 2]])
+    angles = np.array([0.5, 0.55, 70.2])  # rings 0, 0 and 70 (ring width 1)
+    codes = ring_codes(pairs, angles, 3, 1.0, 128)
+    assert codes.shape == (2, 3) and codes.dtype == np.uint64
+    assert list(codes[0]) == [1, 1, 1]  # ring 0: every star has a neighbour there
+    assert list(codes[1]) == [0, 1 << 6, 1 << 6]  # ring 70 = word 1, bit 6: stars 1 and 2
+    assert np.bitwise_count(codes).sum() == 5
+
+
+@pytest.mark.parametrize("variant", [{"score": "neighbours"}, {"score": "paper"},
+                                     {"score": "neighbours", "threshold": "fraction"}])
+def test_true_star_is_a_top_candidate(db: NavDatabase, frames, variant) -> None:
+    m = RadialMatcher(db, **variant)
+    row = {int(h): i for i, h in enumerate(db.stars.hip)}
+    found = total = 0
+    for f in frames[:40]:
+        if len(f.centroids) < 6:
+            continue
+        d = pairwise_angles(CAMERA.pixel_to_vector(f.centroids.xy))
+        for i in range(len(d)):
+            total += 1
+            found += row[int(f.hip[i])] in m.candidates(np.delete(d[i], i), TOL)[:8]
+    assert found >= 0.9 * total
+
+
+@pytest.mark.slow
+def test_identifies_99_percent_of_frames_with_four_stars(db: NavDatabase, frames) -> None:
+    solved = wrong = with_four = solved_four = 0
+    for f in frames:
+        sol = solve(f.centroids, CAMERA, db, method="radial", options=OPTIONS)
+        s = score(sol, f.quaternion, f.hip.tolist(), blends=f.blends)
+        solved += s.solved
+        wrong += s.solved and not s.correct
+        if len(f.centroids) >= 4:
+            with_four += 1
+            solved_four += s.solved
+    assert wrong == 0
+    assert solved_four >= 0.99 * with_four
+    assert with_four >= 0.75 * len(frames)
+
+
+@pytest.mark.slow
+def test_random_points_never_solve(db: NavDatabase) -> None:
+    for i in range(200):
+        pts = random_points(CAMERA, 3 + i % 28, rng=20_000 + i)
+        assert not solve(pts, CAMERA, db, method="radial", options=OPTIONS).solved
+
+
+def test_matcher_is_registered(db: NavDatabase) -> None:
+    assert isinstance(get_matcher(db, "radial"), RadialMatcher)
+    with pytest.raises(ValueError):
+        RadialMatcher(db, score="nope")

@@ -164,9 +164,12 @@ class Camera:
         v = np.asarray(v, dtype=np.float64).reshape(-1, 3)
         z = v[:, 2]
         front = z > 1e-9
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xn = np.where(front, v[:, 0] / np.where(front, z, 1.0), np.nan)
-            yn = np.where(front, v[:, 1] / np.where(front, z, 1.0), np.nan)
+        zs = np.where(front, z, 1.0)
+        xn = v[:, 0] / zs
+        yn = v[:, 1] / zs
+        if not front.all():
+            xn[~front] = np.nan
+            yn[~front] = np.nan
         if self.distortion:
             xn, yn = _distort(xn, yn, self.distortion)
         xy = np.stack([self.f_px * xn + self.cx, self.f_px * yn + self.cy], axis=1)
@@ -175,14 +178,13 @@ class Camera:
 
     def contains(self, xy: FloatArray, margin_px: float = 0.0) -> np.ndarray:
         """Mask of pixel positions inside the image (pixel edges at -0.5 and W-0.5)."""
-        x, y = xy[:, 0], xy[:, 1]
-        with np.errstate(invalid="ignore"):
-            return (
-                (x >= -0.5 + margin_px)
-                & (x <= self.width - 0.5 - margin_px)
-                & (y >= -0.5 + margin_px)
-                & (y <= self.height - 0.5 - margin_px)
-            )
+        x, y = xy[:, 0], xy[:, 1]  # NaN (behind the camera) compares False, without a warning
+        return (
+            (x >= -0.5 + margin_px)
+            & (x <= self.width - 0.5 - margin_px)
+            & (y >= -0.5 + margin_px)
+            & (y <= self.height - 0.5 - margin_px)
+        )
 
 
 def _distort(xn: FloatArray, yn: FloatArray, coeffs: tuple[float, ...]) -> tuple[FloatArray, FloatArray]:

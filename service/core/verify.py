@@ -191,13 +191,16 @@ class Verifier:
         m_obs, m_cat, p_single = self._match_all(r)
         if len(m_obs) < max(len(obs_idx), 3):
             return None
-        r = wahba_svd(obs.vec[m_obs], stars[m_cat])
-        m_obs, m_cat, p_single = self._match_all(r)
-        for _ in range(3):  # a compact hypothesis in a wide field: refit while the matches grow
-            grown = self._match_all(wahba_svd(obs.vec[m_obs], stars[m_cat]))
+        # refit with every pair while the pairs grow (a compact hypothesis in a wide field
+        # extrapolates poorly at first); ``r`` always ends fitted to the pairs kept
+        for _ in range(4):
+            r = wahba_svd(obs.vec[m_obs], stars[m_cat])
+            grown = self._match_all(r)
             if len(grown[0]) <= len(m_obs):
                 break
             m_obs, m_cat, p_single = grown
+        else:
+            r = wahba_svd(obs.vec[m_obs], stars[m_cat])
         hyp = np.isin(m_obs, obs_idx)
         n_extra = int(len(m_obs) - hyp.sum())
         n_free = len(obs) - len(obs_idx)
@@ -208,7 +211,6 @@ class Verifier:
         prob = min(1.0, tail * max(trials, 1))
         if prob > self.max_false_prob:
             return None
-        r = wahba_svd(obs.vec[m_obs], stars[m_cat])
         found = Verified(m_obs, m_cat, r, prob, trials)
         if prob > self.strong_false_prob:
             self.marginal.append(found)

@@ -242,9 +242,11 @@ class Verifier:
                 continue
             d2 = ((obs.xy[rows, None, :] - pxy[None, :, :]) ** 2).sum(axis=2)
             close = d2 <= rad2
-            # unambiguous pairs only: exactly one candidate on each side within the radius
-            # (a false star beside a real one, or a catalogue double, proves nothing)
-            single = (close.sum(axis=1) == 1)[:, None] & (close.sum(axis=0) == 1)[None, :] & close
+            # unambiguous pairs only: within the radius, and no other candidate on either side
+            # within twice the radius (a false star beside a real one, a catalogue double, or a
+            # noisy star nearer its neighbour's prediction than its own proves nothing)
+            crowd = d2 <= 4 * rad2
+            single = (crowd.sum(axis=1) == 1)[:, None] & (crowd.sum(axis=0) == 1)[None, :] & close
             ok = single.any(axis=1)
             best_cat = single.argmax(axis=1)
             all_obs.append(rows[ok])

@@ -87,3 +87,22 @@ def test_misuse_raises(seed000_db) -> None:
         solve(Centroids.from_list([[1, 2]]), SEED000_CAMERA, seed000_db, method="nope")
     with pytest.raises(InvalidInputError, match="centroids"):
         Centroids.from_list([[1, float("nan")]])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["auto", *SEED000_METHODS])
+def test_missing_stars_magnitude_noise_and_more_false_stars(method: str, seed000_db) -> None:
+    """A harsher sky: 20% of stars missing, 0.5 mag brightness noise (order scrambled), 4 false
+    stars, 1.5 px centroid noise. Fewer frames solve; none may be wrong."""
+    from service.core.pipeline import SolveOptions
+
+    cfg = SimConfig(mag_limit=6.5, centroid_noise_px=1.5, mag_noise=0.5, false_stars=4, missing_prob=0.2)
+    frames = simulate_frames(SEED000_CAMERA, 150, cfg, rng=11)
+    opts = SolveOptions(centroid_sigma_px=1.5)
+    solved = 0
+    for f in frames:
+        sol = solve(f.centroids, SEED000_CAMERA, seed000_db, method=method, options=opts)
+        s = score(sol, f.quaternion, f.hip.tolist(), blends=f.blends)
+        assert not (s.solved and not s.correct), "wrong answer"
+        solved += s.solved
+    assert solved >= 0.9 * len(frames)

@@ -11,11 +11,22 @@ from ..navdb.reader import NavDatabase
 from .base import Matcher, Method, SolveContext
 from .dmv import Dmv
 from .maxangle import MaxAngle
+from .pso import Pso
 from .pyramid import Pyramid
 from .radial import Radial
 from .triangle import Triangle
 
-_REGISTRY: dict[str, Method] = {m.name: m for m in (MaxAngle(), Pyramid(), Triangle(), Radial(), Dmv())}
+_REGISTRY: dict[str, Method] = {
+    m.name: m
+    for m in (
+        MaxAngle(),
+        Pyramid(),
+        Triangle(),
+        Radial(),
+        Dmv(),
+        Pso(),
+    )
+}
 
 AUTO_ORDER: tuple[str, ...] = ("maxangle", "pyramid")
 """``auto`` tries these in order (fastest first, measured by bench/bench_methods.py), skipping

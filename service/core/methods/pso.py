@@ -1,0 +1,337 @@
+"""``pso``: a star's shortest closed tour through its neighbours (seed 004, Mao et al.).
+
+Feature of a star: the stars within an angular circle of radius ``r`` around it, and the
+shortest closed tour that starts at the star and visits them all. The radius adapts to the sky:
+``r0`` (``radius_deg``, 4 deg) by default; fewer than 6 neighbours within ``r0`` -> 5 deg; more
+than 25 -> 2.5 deg (keeps 4-25 stars per pattern). Stored for every catalogue star: the tour
+length (sorted, binary search), the tour's first three stars (the centre, then the centre's
+tour neighbour nearer to it, then the next one) with ``d12``, ``d23`` and, for verification,
+``d13``; the three magnitudes are read from ``stars/mag`` by id rather than stored again.
+
+Identification: candidate masters are the brightest stars farther than ``r`` from every image
+edge (``max_masters`` of them), tried nearest the image centre first; the master's circle gives
+a tour whose length is looked up by binary search, then ``d12``/``d23``, ``d13`` and the
+brightness of the three stars filter the records; the survivors go to the shared verifier. On
+failure, the next master.
+
+Tour search (``sky_tour``): ``"pso"`` is the paper's hybrid particle swarm (80 particles, 200
+iterations, seeded; see ``_tour.pso_tour``); ``"exact"`` is the deterministic tour of
+``_tour.best_tours`` (Held-Karp up to 10 stars, else the best of 8 nearest-neighbour starts
+improved by 2-opt and or-opt). The catalogue side is always built with the deterministic tour:
+the swarm costs ~60 ms per star (~9 minutes for the catalogue) and, on 12+ stars, often stops
+short of the shortest tour, so the same stars give different lengths on the two sides (the
+paper's failure mode; ``bench/bench_pso.py`` measures how often).
+
+Where the paper is weak, and what ``matching="robust"`` (the default) does instead of
+``"paper"``:
+
+- the tour length depends on every star of the circle, and a star within the centroid
+  tolerance of the circle's edge is in on one side and out on the other: the sky side also tries
+  the tours with those (at most two) boundary stars flipped;
+- the radius depends on a star count that can differ by one or two between sky and catalogue
+  (boundary stars, blends): the catalogue stores a record for every radius the rule would choose
+  for counts within ``count_margin`` of its own, so the sky side's choice is always stored;
+- the first three stars of a tour change when two tours are nearly as short or the centre's two
+  tour neighbours are nearly equidistant, while the length barely moves: the record's ``d12``,
+  ``d23``, ``d13`` triangle is searched among all the circle's stars instead of the sky tour's
+  own first three, and mirror images are refused (triple-product sign);
+- magnitudes only rank candidates (the frame's brightness order against the catalogue's) and
+  never reject one: the paper fails when magnitudes leave more than one candidate, we let the
+  verifier decide.
+
+The observation carries each star's brightness order, not calibrated magnitudes, so the
+magnitude check compares the order of the three stars' brightness with the catalogue's.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..camera import Camera
+from ..catalog import StarTable
+from ..geometry import chord_from_angle, pairwise_angles
+from ..navdb.reader import NavDatabase
+from ..types import FloatArray, IntArray
+from ..verify import Verified
+from ._grow import screen_and_grow
+from ._tour import best_tours, first_three, pso_tour
+from .base import Progress, SolveContext
+
+R_SMALL_DEG = 2.5
+R_LARGE_DEG = 5.0
+FEW = 6
+"""Fewer neighbours than this within ``r0``: the circle grows to ``R_LARGE_DEG``."""
+MANY = 25
+"""More neighbours than this within ``r0``: the circle shrinks to ``R_SMALL_DEG``."""
+KEY_STRIDE = 100.0
+"""Records are sorted by ``radius code * KEY_STRIDE + tour length (rad)``."""
+MAX_CANDIDATES = 64
+
+
+def radius_code(n_neighbours: np.ndarray | int) -> np.ndarray:
+    """Radius code (0: 2.5 deg, 1: r0, 2: 5 deg) chosen for a neighbour count within r0."""
+    n = np.asarray(n_neighbours)
+    return np.where(n < FEW, 2, np.where(n > MANY, 0, 1))
+
+
+def angle_matrices(vec: FloatArray) -> FloatArray:
+    """Pairwise angles ``(B, n, n)`` of unit vectors ``(B, n, 3)``."""
+    diff = vec[:, :, None, :] - vec[:, None, :, :]
+    chord = np.sqrt(np.einsum("bijk,bijk->bij", diff, diff))
+    return 2.0 * np.arcsin(np.clip(chord / 2.0, 0.0, 1.0))
+
+
+class Pso:
+    name = "pso"
+    summary = "shortest closed tour of a star's neighbours, hybrid particle swarm (seed 004)"
+
+    def build_tables(
+        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        r0 = float(params.get("radius_deg", 4.0))
+        margin = int(params.get("count_margin", 2))
+        radii = (R_SMALL_DEG, r0, R_LARGE_DEG)
+        vec = stars.vec
+        tree = cKDTree(vec)
+        progress("neighbours", 0.0)
+        neigh = [tree.query_ball_point(vec, float(chord_from_angle(math.radians(r)))) for r in radii]
+        n0 = np.array([len(x) - 1 for x in neigh[1]])
+        codes = np.stack([radius_code(n0 + k) for k in range(-margin, margin + 1)], axis=1)
+        centre, code, members = [], [], []
+        for i in range(len(vec)):
+            for c in np.unique(codes[i]):
+                mem = [j for j in neigh[int(c)][i] if j != i]
+                if len(mem) >= 2:
+                    centre.append(i)
+                    code.append(int(c))
+                    members.append(np.asarray(mem, np.int64))
+        size = np.array([len(m) for m in members])
+        n_rec = len(centre)
+        length = np.zeros(n_rec)
+        ids = np.zeros((n_rec, 3), np.int64)
+        sides = np.zeros((n_rec, 3))
+        centre_a = np.asarray(centre, np.int64)
+        done = 0
+        for k in np.unique(size):
+            rows = np.flatnonzero(size == k)
+            for lo in range(0, len(rows), 4096):
+                part = rows[lo:lo + 4096]
+                nodes = np.column_stack([centre_a[part], np.stack([members[r] for r in part])])
+                d = angle_matrices(vec[nodes])
+                order, tour_len = best_tours(d)
+                s2, s3 = first_three(d, order)
+                b = np.arange(len(part))
+                length[part] = tour_len
+                ids[part] = np.column_stack([nodes[:, 0], nodes[b, s2], nodes[b, s3]])
+                sides[part] = np.column_stack([d[b, 0, s2], d[b, s2, s3], d[b, 0, s3]])
+                done += len(part)
+                progress(f"tours ({k + 1} stars)", done / max(n_rec, 1))
+        key = np.asarray(code, np.float64) * KEY_STRIDE + length
+        order_k = np.argsort(key, kind="stable")
+        tables: dict[str, np.ndarray] = {
+            "key": key[order_k],
+            "ids": ids[order_k].astype(np.int32),
+            "sides": sides[order_k].astype(np.float32),
+            "size": size[order_k].astype(np.uint8 if size.max(initial=0) < 256 else np.uint16),
+        }
+        meta: dict[str, Any] = {
+            "radius_deg": r0, "radii_deg": list(radii), "few": FEW, "many": MANY, "count_margin": margin,
+            "n_records": int(n_rec), "sky_tour": str(params.get("sky_tour", "exact")),
+            "matching": str(params.get("matching", "robust")),
+            "max_masters": int(params.get("max_masters", 8)),
+        }
+        progress(f"{n_rec} tours", 1.0)
+        return tables, meta
+
+    def matcher(self, db: NavDatabase) -> PsoMatcher:
+        return PsoMatcher(db)
+
+
+class PsoMatcher:
+    """Solver over the ``pso`` tables; ``sky_tour``/``matching``/``max_masters`` default to the
+    values the database was built with (see the module docstring)."""
+
+    def __init__(self, db: NavDatabase, *, sky_tour: str | None = None, matching: str | None = None,
+                 max_masters: int | None = None, particles: int = 80, iterations: int = 200,
+                 seed: int = 0) -> None:
+        t = db.tables["pso"]
+        prm = db.method_params("pso")
+        self.key, self.ids, self.sides = t["key"], t["ids"], t["sides"]
+        self.radii = [math.radians(r) for r in prm["radii_deg"]]
+        self.sky_tour = sky_tour or prm.get("sky_tour", "exact")
+        self.matching = matching or prm.get("matching", "robust")
+        self.max_masters = int(max_masters or prm.get("max_masters", 8))
+        if self.sky_tour not in ("exact", "pso") or self.matching not in ("paper", "robust"):
+            raise ValueError(f"pso: unknown variant {self.sky_tour!r}/{self.matching!r}")
+        self.particles, self.iterations, self.seed = particles, iterations, seed
+        self.vec = db.stars.vec
+        self.mag = np.asarray(db.stars.mag, np.float64)
+        self.tours = 0  # tours searched (diagnostics)
+
+    # ---- sky side ----------------------------------------------------------------------------
+    def identify(self, ctx: SolveContext) -> Verified | None:
+        obs = ctx.obs
+        for c, rows in enumerate(obs.by_camera):
+            if len(rows) < 3:
+                continue
+            v_cam = obs.vec[rows] @ np.asarray(obs.mountings[c]).T
+            edge = edge_distance(obs.cameras[c], v_cam)
+            d = pairwise_angles(obs.vec[rows])
+            eligible = np.flatnonzero(edge > self.radii[1])[: self.max_masters]
+            off_axis = np.arccos(np.clip(v_cam[eligible, 2], -1.0, 1.0))
+            for m in eligible[np.argsort(off_axis, kind="stable")]:
+                if ctx.expired():
+                    return None
+                found = self._try_master(ctx, rows, d, edge, int(m))
+                if found is not None:
+                    return found
+        return None
+
+    def _try_master(self, ctx: SolveContext, rows: IntArray, d: FloatArray, edge: FloatArray,
+                    m: int) -> Verified | None:
+        dm = d[m]
+        others = np.flatnonzero(np.arange(len(dm)) != m)
+        code = int(radius_code(int((dm[others] <= self.radii[1]).sum())))
+        r = self.radii[code]
+        if edge[m] <= r:
+            return None
+        tol = ctx.tol_rad
+        inside = others[dm[others] <= r]
+        variants = [inside]
+        if self.matching == "robust":
+            near = others[np.abs(dm[others] - r) <= tol]
+            near = near[np.argsort(np.abs(dm[near] - r), kind="stable")][:2]
+            for flip in range(1, 1 << len(near)):
+                flipped = {int(near[b]) for b in range(len(near)) if flip >> b & 1}
+                variants.append(np.array(sorted(set(inside.tolist()) ^ flipped), np.int64))
+        pool = np.union1d(inside, others[np.abs(dm[others] - r) <= tol])
+        for members in variants:
+            if len(members) < 2 or ctx.expired():
+                continue
+            nodes = np.concatenate([[m], members])
+            dn = d[np.ix_(nodes, nodes)]
+            length, s2, s3 = self._tour(dn)
+            win = self._window(code, length, len(nodes), tol)
+            if len(win) == 0:
+                continue
+            if self.matching == "paper":
+                found = self._paper(ctx, rows, d, m, nodes[s2], nodes[s3], win)
+            else:
+                found = self._robust(ctx, rows, d, m, pool, win)
+            if found is not None:
+                return found
+        return None
+
+    def _tour(self, dn: FloatArray) -> tuple[float, int, int]:
+        self.tours += 1
+        if self.sky_tour == "pso":
+            order, length = pso_tour(dn, particles=self.particles, iterations=self.iterations, rng=self.seed)
+            order = order[None]
+        else:
+            order, lengths = best_tours(dn[None])
+            length = float(lengths[0])
+        s2, s3 = first_three(dn[None], order)
+        return length, int(s2[0]), int(s3[0])
+
+    def _window(self, code: int, length: float, n_nodes: int, tol: float) -> IntArray:
+        """Records of radius ``code`` whose tour length is within tolerance of ``length``:
+        each of the ``n_nodes`` stars moves the length by at most ~``tol``, independently."""
+        tol_len = tol * math.sqrt(n_nodes)
+        base = code * KEY_STRIDE + length
+        lo, hi = np.searchsorted(self.key, [base - tol_len, base + tol_len])
+        return np.arange(lo, hi)
+
+    def _paper(self, ctx: SolveContext, rows: IntArray, d: FloatArray, m: int, j: int, k: int,
+               win: IntArray) -> Verified | None:
+        """The paper's cascade: d12 and d23, then d13, then magnitudes; only a unique survivor is
+        verified."""
+        tol = ctx.tol_rad
+        s = self.sides[win]
+        cand = win[(np.abs(s[:, 0] - d[m, j]) <= tol) & (np.abs(s[:, 1] - d[j, k]) <= tol)]
+        if len(cand) > 1:
+            cand = cand[np.abs(self.sides[cand, 2] - d[m, k]) <= tol]
+        if len(cand) > 1:
+            disc = self._discordance(np.array([m, j, k]), self.ids[cand])
+            cand = cand[disc == disc.min()]
+        if len(cand) != 1:
+            return None
+        return self._verify(ctx, rows, d, np.array([m, j, k]), self.ids[cand].astype(np.int64))
+
+    def _robust(self, ctx: SolveContext, rows: IntArray, d: FloatArray, m: int, pool: IntArray,
+                win: IntArray) -> Verified | None:
+        """Every record of the window whose d12/d23/d13 triangle (same handedness) appears
+        anywhere among the circle's stars, grouped by the observed stars it lands on."""
+        tol = ctx.tol_rad
+        s = self.sides[win].astype(np.float64)
+        dj = d[m, pool]
+        hit1 = np.abs(s[:, 0, None] - dj[None, :]) <= tol  # (W, J): star 2 candidates
+        hit3 = np.abs(s[:, 2, None] - dj[None, :]) <= tol  # star 3 candidates
+        djk = d[np.ix_(pool, pool)]
+        hit2 = np.abs(s[:, 1, None, None] - djk[None]) <= tol  # (W, J, J): side 2-3
+        w, a, b = np.nonzero(hit1[:, :, None] & hit3[:, None, :] & hit2)
+        if len(w) == 0:
+            return None
+        cat = self.ids[win[w]].astype(np.int64)
+        obs3 = np.column_stack([np.full(len(w), m), pool[a], pool[b]])
+        ov = ctx.obs.vec[rows[obs3]]
+        cv = self.vec[cat]
+        s_obs = np.sign(np.einsum("ij,ij->i", ov[:, 0], np.cross(ov[:, 1], ov[:, 2])))
+        s_cat = np.sign(np.einsum("ij,ij->i", cv[:, 0], np.cross(cv[:, 1], cv[:, 2])))
+        keep = s_obs == s_cat
+        obs3, cat = obs3[keep], cat[keep]
+        if len(cat) == 0:
+            return None
+        pair_key = obs3[:, 1] * len(rows) + obs3[:, 2]
+        for key in np.unique(pair_key):
+            sel = np.flatnonzero(pair_key == key)
+            tri = obs3[sel[0]]
+            cands = cat[sel]
+            if len(cands) > MAX_CANDIDATES:
+                continue
+            cands = cands[np.argsort(self._discordance(tri, cands), kind="stable")]
+            found = self._verify(ctx, rows, d, tri, cands)
+            if found is not None:
+                return found
+        return None
+
+    def _verify(self, ctx: SolveContext, rows: IntArray, d: FloatArray, tri: IntArray,
+                cands: IntArray) -> Verified | None:
+        """Screen candidate triples ``cands`` ``(K, 3)`` for the observed triangle ``tri`` (local
+        indices) on the stars within 5 deg of the master, and verify the best ones with the
+        stars that screened as part of the hypothesis (``_grow.screen_and_grow``).
+
+        The verifier's own screen predicts the frame's brightest stars: in a 20 deg field
+        those lie up to 15 deg from a triangle a degree or two across, and 1 px of centroid
+        noise tilts such an attitude by several pixels out there, so right candidates fail the
+        screen. Stars within 5 deg of the master screen reliably, and a hypothesis spanning
+        them fits an attitude good enough for the verifier to extend over the whole field.
+        """
+        near = np.flatnonzero(d[tri[0]] <= self.radii[2])
+        return screen_and_grow(ctx, rows[tri], cands, rows[near])
+
+    def _discordance(self, obs_tri: IntArray, cat: IntArray) -> IntArray:
+        """How many of the three star pairs are ordered differently by brightness in the frame
+        (observation rows are brightest first) and by catalogue magnitude; ``(K,)`` in 0..3."""
+        cat = np.asarray(cat).reshape(-1, 3)
+        mag = self.mag[cat]
+        out = np.zeros(len(cat), np.int64)
+        for a, b in ((0, 1), (0, 2), (1, 2)):
+            brighter_obs = obs_tri[a] < obs_tri[b]
+            out += (mag[:, a] < mag[:, b]) != brighter_obs
+        return out
+
+
+def edge_distance(camera: Camera, v_cam: FloatArray) -> FloatArray:
+    """Angular distance (radians) of camera-frame unit vectors ``(N, 3)`` from the nearest image
+    edge (positive inside). An edge of a pinhole image is a great circle through the camera
+    centre and two corners."""
+    w, h = camera.width - 0.5, camera.height - 0.5
+    corners = camera.pixel_to_vector(np.array([[-0.5, -0.5], [w, -0.5], [w, h], [-0.5, h]]))
+    normals = np.cross(corners, np.roll(corners, -1, axis=0))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals *= np.sign(normals[:, 2])[:, None]  # the boresight is inside
+    return np.arcsin(np.clip(v_cam @ normals.T, -1.0, 1.0)).min(axis=1)

@@ -43,6 +43,11 @@ class SolveOptions:
         Brightest stars a method may combine into patterns.
     timeout_ms : float
         Give up after this long.
+    retry_sigma_factor : float
+        If nothing is proven, search once more assuming ``centroid_sigma_px`` times this (real
+        faint stars are often worse than assumed); the hypotheses of the first pass still count
+        in the coincidence bound. The default 1 disables the retry: it doubles the cost of
+        frames that have no answer.
     """
 
     centroid_sigma_px: float = 1.0
@@ -50,6 +55,7 @@ class SolveOptions:
     max_false_prob: float = 1e-5
     max_stars: int = 8
     timeout_ms: float = 500.0
+    retry_sigma_factor: float = 1.0
 
 
 DEFAULT_OPTIONS = SolveOptions()
@@ -78,8 +84,6 @@ def solve(
         Prior attitude; answers whose boresight lies farther than ``radius_deg`` are refused.
     """
     identity = np.eye(3)
-    if isinstance(db, NavDatabaseSet):
-        db = db.for_camera(camera.fov_deg, camera.diagonal_fov_deg)
     return solve_rig([(centroids, camera, None)], db, method=method, hint=hint, options=options,
                      _mountings=[identity])
 
@@ -101,42 +105,64 @@ def solve_rig(
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
-    if isinstance(db, NavDatabaseSet):
-        widest = max((cam for _, cam, _ in frames), key=lambda c: c.diagonal_fov_deg, default=None)
-        db = db.for_camera(widest.fov_deg, widest.diagonal_fov_deg) if widest else next(iter(db.members.values()))
-    methods = resolve(db, method)
     if not frames:
         raise InvalidInputError("cameras", "at least one camera frame is required")
+    if isinstance(db, NavDatabaseSet):
+        widest = max((cam for _, cam, _ in frames), key=lambda c: c.diagonal_fov_deg)
+        members = db.for_camera(widest.fov_deg, widest.diagonal_fov_deg)
+    else:
+        members = [db]
+    method_lists = [resolve(m, method) for m in members]
     mountings = _mountings or [np.eye(3) if m is None else quat_to_matrix(np.asarray(m, float)) for _, _, m in frames]
     obs = _observation(frames, mountings)
     t1 = time.perf_counter()
     timings["vectors"] = (t1 - t0) * 1e3
-    sigma = options.centroid_sigma_px
-    radius = options.match_radius_px or max(2.5, 3.0 * sigma)
-    scale = obs.pixel_scale_rad
-    tol = (3.0 * math.sqrt(2.0) * sigma + 0.5) * scale
-    verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob)
     deadline = t0 + options.timeout_ms / 1e3
     found: Verified | None = None
-    used = methods[-1] if methods else method
-    for name in methods:
-        ctx = SolveContext(obs, verifier, tol, deadline, options.max_stars)
-        found = get_matcher(db, name).identify(ctx) or verifier.best_marginal()
-        if found is not None and hint is not None and not _near_hint(found.matrix, hint):
-            found = None
-        if found is not None:
-            used = name
+    used, trials = method, 0
+    sigmas = [options.centroid_sigma_px]
+    if options.retry_sigma_factor > 1:
+        sigmas.append(options.centroid_sigma_px * options.retry_sigma_factor)
+    # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
+    # the coincidence bound is multiplied by
+    for sigma in sigmas:
+        for member, methods in zip(members, method_lists, strict=True):
+            db = member
+            found, used, trials = _identify(obs, db, methods, sigma, options, deadline, hint, trials)
+            if found is not None or time.perf_counter() > deadline:
+                break
+        if found is not None or time.perf_counter() > deadline:
             break
     t2 = time.perf_counter()
     timings["identify"] = (t2 - t1) * 1e3
     if found is None:
         timings["total"] = (time.perf_counter() - t0) * 1e3
         return Solution(SolveStatus.NO_SOLUTION, used, timings_ms=timings)
-    sol = _solution(obs, db, found, used, sigma * scale)
+    sol = _solution(obs, db, found, used, sigma * obs.pixel_scale_rad)
     timings["attitude"] = (time.perf_counter() - t2) * 1e3
     timings["total"] = (time.perf_counter() - t0) * 1e3
     object.__setattr__(sol, "timings_ms", timings)
     return sol
+
+
+def _identify(
+    obs: Observation, db: NavDatabase, methods: list[str], sigma: float, options: SolveOptions,
+    deadline: float, hint: tuple[Quaternion, float] | None, trials: int,
+) -> tuple[Verified | None, str, int]:
+    """One pass of every method at centroid error ``sigma`` (px); ``trials`` hypotheses were
+    already tried on this frame (they count in the coincidence bound)."""
+    radius = options.match_radius_px or max(2.5, 3.0 * sigma)
+    tol = (3.0 * math.sqrt(2.0) * sigma + 0.5) * obs.pixel_scale_rad
+    verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob, trials=trials)
+    used = methods[-1] if methods else ""
+    for name in methods:
+        ctx = SolveContext(obs, verifier, tol, deadline, options.max_stars)
+        found = get_matcher(db, name).identify(ctx) or verifier.best_marginal()
+        if found is not None and hint is not None and not _near_hint(found.matrix, hint):
+            found = None
+        if found is not None:
+            return found, name, verifier.trials
+    return None, used, verifier.trials
 
 
 def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: list[np.ndarray]) -> Observation:

@@ -18,7 +18,7 @@ from service.core.centroid import load_image
 from service.core.evaluate import attitude_error
 from service.core.navdb import build_database_set, open_database
 from service.core.navdb.default import DEFAULT_MEMBERS
-from service.core.pipeline import solve, solve_image
+from service.core.pipeline import SolveOptions, solve, solve_image
 from service.core.types import Centroids
 from tests.conftest import ROOT
 
@@ -26,8 +26,8 @@ REAL = Path(os.environ.get("SKYFIX_REAL_DATA", ROOT.parent / "shared" / "data" /
 pytestmark = pytest.mark.skipif(not (REAL / "truth.json").is_file(), reason=f"real images absent ({REAL})")
 
 KNOWN_HARD = {
-    "cedar-solve/tree.jpg": "branches cover most of the field: 4 of the 20 brightest detections are stars",
-    "openstartracker/img0.png": "6 deg field, stars near the noise floor: too few catalogue stars to prove",
+    "cedar-solve/tree.jpg": "branches cover most of the field: 4 of the 20 brightest detections are stars,"
+    " too few matches among 150 detections to beat the coincidence bound",
 }
 """Images we do not solve yet, and why. A wrong answer on them is still a failure."""
 
@@ -45,11 +45,18 @@ def _camera(t: dict) -> Camera:
     return Camera.from_fov(t.get("nominal_fov_deg") or t["fov_deg"], t["width"], t["height"])
 
 
+def _options(name: str) -> SolveOptions:
+    """What a user of each camera would say: the openstartracker stars sit near the noise floor
+    and centroid to about 1 px, the others to well under. A generous time limit keeps the test
+    independent of machine load (the service's default is 500 ms)."""
+    return SolveOptions(centroid_sigma_px=1.5 if name.startswith("openstartracker/") else 1.0, timeout_ms=10_000)
+
+
 @pytest.mark.real
 def test_every_real_image_solves_within_0_1_deg(default_set) -> None:
     results = {}
     for name, t in _truth().items():
-        sol = solve_image(load_image(REAL / name), _camera(t), default_set)
+        sol = solve_image(load_image(REAL / name), _camera(t), default_set, options=_options(name))
         err = attitude_error(sol.quaternion, t["quaternion_icrs_to_camera_wxyz"])[0] if sol.solved else None
         results[name] = err
         if sol.solved:
@@ -93,9 +100,9 @@ def test_matched_centroid_lists_identify_the_reference_stars(default_set) -> Non
         mags = np.array([r["mag"] for r in rows]) + rng.normal(0, 0.3, len(rows))
         order = np.argsort(mags)
         xy = np.array([[rows[i]["x"], rows[i]["y"]] for i in order])
-        sol = solve(Centroids(xy, -mags[order]), _camera(truth[name]), default_set)
+        sol = solve(Centroids(xy, -mags[order]), _camera(truth[name]), default_set, options=_options(name))
         if sol.solved:
             solved += 1
             for s in sol.stars:
                 assert rows[order[s.centroid]]["hip"] == s.hip, name
-    assert solved >= 34
+    assert solved >= 36

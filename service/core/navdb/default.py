@@ -12,7 +12,7 @@ DEFAULT_NAME = "default"
 
 DEFAULT_MEMBERS: dict[str, BuildConfig] = {
     "narrow": BuildConfig(
-        fov_min_deg=3.5, fov_max_deg=13.0, mag_limit=8.0, double_star_sep_deg=0.01,
+        fov_min_deg=3.5, fov_max_deg=16.5, mag_limit=8.0, double_star_sep_deg=0.01,
         density_cap=12, density_radius_deg=2.5, methods=("maxangle", "pyramid"),
         method_params={"maxangle": {"d_max_deg": 3.5}},
     ),
@@ -21,7 +21,7 @@ DEFAULT_MEMBERS: dict[str, BuildConfig] = {
         density_cap=12, density_radius_deg=4.0, methods=("maxangle", "pyramid"),
     ),
 }
-"""The default database set: a deep (V <= 8, density-capped) member for cameras of 3.5-13 deg
+"""The default database set: a deep (V <= 8, density-capped) member for cameras of 3.5-16.5 deg
 diagonal, and a bright one for 9-32 deg (the seed-000 camera, the real test images, most star
 trackers and wide-field cameras)."""
 

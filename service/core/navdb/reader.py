@@ -111,18 +111,20 @@ class NavDatabaseSet:
     manifest: dict[str, Any]
     members: dict[str, NavDatabase]
 
-    def for_camera(self, fov_deg: float, diagonal_fov_deg: float | None = None) -> NavDatabase:
-        """The member serving a camera of horizontal field ``fov_deg`` and diagonal
-        ``diagonal_fov_deg`` (degrees): of the members whose range holds it (side at least
-        ``fov_min_deg``, diagonal at most ``fov_max_deg``) the deepest, i.e. the one with the
-        smallest ``fov_max_deg``; otherwise the one whose range is nearest."""
+    def for_camera(self, fov_deg: float, diagonal_fov_deg: float | None = None) -> list[NavDatabase]:
+        """Members to try for a camera of horizontal field ``fov_deg`` and diagonal
+        ``diagonal_fov_deg`` (degrees), best first: those whose range holds it (side at least
+        ``fov_min_deg``, diagonal at most ``fov_max_deg``), deepest (smallest ``fov_max_deg``)
+        first; if none holds it, the one whose range is nearest."""
         diag = fov_deg if diagonal_fov_deg is None else diagonal_fov_deg
 
-        def gap(db: NavDatabase) -> tuple[float, float]:
+        def gap(db: NavDatabase) -> float:
             lo, hi = float(db.manifest["fov_min_deg"]), float(db.manifest["fov_max_deg"])
-            return max(lo - fov_deg, 0.0) + max(diag - hi, 0.0), hi
+            return max(lo - fov_deg, 0.0) + max(diag - hi, 0.0)
 
-        return min(self.members.values(), key=gap)
+        ranked = sorted(self.members.values(), key=lambda m: (gap(m), float(m.manifest["fov_max_deg"])))
+        fitting = [m for m in ranked if gap(m) == 0.0]
+        return fitting or ranked[:1]
 
     @property
     def methods(self) -> list[str]:

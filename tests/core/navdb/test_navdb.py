@@ -117,10 +117,11 @@ def test_database_set_picks_a_member_per_camera(tmp_path: Path) -> None:
     path = build_database_set(tmp_path / "set", {"narrow": narrow, "wide": wide})
     db = open_database(path, verify_hashes=True)
     assert isinstance(db, NavDatabaseSet)
-    assert db.for_camera(4.0, 5.0).path.name == "narrow"
-    assert db.for_camera(10.0, 14.0).path.name == "wide"
-    assert db.for_camera(40.0, 50.0).path.name == "wide"  # nearest range
-    assert db.for_camera(1.0, 1.4).path.name == "narrow"
+    assert [m.path.name for m in db.for_camera(4.0, 5.0)] == ["narrow"]
+    assert [m.path.name for m in db.for_camera(6.0, 6.0)] == ["narrow", "wide"]  # deepest first
+    assert [m.path.name for m in db.for_camera(10.0, 14.0)] == ["wide"]
+    assert [m.path.name for m in db.for_camera(40.0, 50.0)] == ["wide"]  # nearest range
+    assert [m.path.name for m in db.for_camera(1.0, 1.4)] == ["narrow"]
     assert db.methods == ["pyramid"]
     # a corrupt member is refused naming its file
     (path.resolve() / "wide" / "stars__mag.npy").write_bytes(b"\x93NUMPY")

@@ -35,7 +35,7 @@ def directed_edges(pairs: np.ndarray, angles: np.ndarray, lo: float, hi: float) 
     j = np.searchsorted(angles, hi, side="right")
     p = pairs[i:j].astype(np.int64)
     both = np.concatenate([p, p[:, ::-1]])
-    return both[np.argsort(both[:, 0], kind="stable")]
+    return both[np.argsort(both[:, 0])]  # any order inside a vertex group will do; quicksort is 5x faster
 
 
 def pattern_order(n: int) -> list[tuple[int, int, int]]:

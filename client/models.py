@@ -104,7 +104,16 @@ class SolveRequest(_Model):
     attitude_hint: AttitudeHint | None = Field(
         None, description="Prior attitude (tracking); none = lost in space."
     )
-    epoch: float | None = Field(None, ge=1900, le=2200, description="Decimal year of the observation.")
+    epoch: float | None = Field(
+        None, ge=1900, le=2200,
+        description="Decimal year of the observation. Accepted and range-checked; positions are those of "
+        "the database's epoch (/v1/info), which is within a year of any current observation.",
+    )
+    centroid_sigma_px: float | None = Field(
+        None, gt=0, le=20,
+        description="Expected centroid error per axis, px (default 1). Sets the pattern tolerance and the "
+        "match radius: raise it for faint or distorted stars.",
+    )
 
     @model_validator(mode="after")
     def _single_or_rig(self) -> SolveRequest:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 from pydantic import ValidationError
@@ -107,6 +107,8 @@ def frame_call(req: SolveRequest, db: NavDb, named: Mapping[str, CameraEntry], *
     """The engine call for one request: a single camera, or a rig (``cameras``)."""
     check_method(db, req.method)
     prior = hint(req.attitude_hint) or track_hint
+    if req.centroid_sigma_px is not None:
+        options = replace(options, centroid_sigma_px=req.centroid_sigma_px)
     if req.cameras is None:
         assert req.camera is not None and req.centroids is not None
         cam = resolve_camera(req.camera, "camera", named)

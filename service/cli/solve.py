@@ -56,9 +56,14 @@ def solve_frames(
             truth = rec.get("truth") or {}
             if sol.solved and truth:
                 blends = {int(k): v for k, v in (truth.get("blends") or {}).items()}
-                s = score(sol, truth.get("quaternion"), truth.get("hip"), blends=blends)
+                # a rig's truth lists every camera's HIPs one camera after the other
+                sizes = [len(c.get("centroids", [])) for c in rec["cameras"]] if rec.get("cameras") else [0]
+                hips = truth.get("hip")
+                correct = all(score(sol, truth.get("quaternion"), None if hips is None else hips[o:],
+                                    camera=c, blends={k - o: v for k, v in blends.items() if k >= o}).correct
+                              for c, o in enumerate(np.cumsum([0, *sizes[:-1]]).tolist()))
                 checked += 1
-                wrong += not s.correct
+                wrong += not correct
     t = np.array(times) if times else np.zeros(1)
     err_console.print(
         f"{solved}/{n} identified ({100 * solved / max(n, 1):.1f}%), {wrong} wrong of {checked} with truth; "

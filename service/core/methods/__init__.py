@@ -11,6 +11,7 @@ from ..navdb.reader import NavDatabase
 from .base import Matcher, Method, SolveContext
 from .dmv import Dmv
 from .maxangle import MaxAngle
+from .multifov import MultiFov
 from .pso import Pso
 from .pyramid import Pyramid
 from .radial import Radial
@@ -25,6 +26,7 @@ _REGISTRY: dict[str, Method] = {
         Radial(),
         Dmv(),
         Pso(),
+        MultiFov(),
     )
 }
 

@@ -125,11 +125,13 @@ def wahba_svd(obs: FloatArray, ref: FloatArray, weights: FloatArray | None = Non
     weights : (N,) float64, optional
         Non-negative weights (default all ones).
     """
-    w = np.ones(len(obs)) if weights is None else np.asarray(weights, dtype=np.float64)
-    b = (obs * w[:, None]).T @ ref
+    b = (obs if weights is None else obs * np.asarray(weights, dtype=np.float64)[:, None]).T @ ref
     u, _, vt = np.linalg.svd(b)
-    d = np.linalg.det(u) * np.linalg.det(vt)
-    return u @ np.diag([1.0, 1.0, d]) @ vt
+    r = u @ vt
+    if np.linalg.det(r) < 0:  # a reflection: flip the least significant axis
+        u[:, 2] = -u[:, 2]
+        r = u @ vt
+    return r
 
 
 def quest(obs: FloatArray, ref: FloatArray, weights: FloatArray | None = None) -> FloatArray:
@@ -168,13 +170,16 @@ class AttitudeEstimate:
     sigma_arcsec: tuple[float, float, float]
 
 
-def estimate(obs: FloatArray, ref: FloatArray, *, sigma_rad: float | None = None) -> AttitudeEstimate:
+def estimate(
+    obs: FloatArray, ref: FloatArray, *, sigma_rad: float | None = None, matrix: FloatArray | None = None
+) -> AttitudeEstimate:
     """Attitude from matched pairs, with residuals and the covariance-derived 1-sigma errors
     about the camera's x, y (cross-boresight) and z (roll) axes.
 
     ``sigma_rad`` is the per-star measurement error; by default the fit's own RMS residual.
+    ``matrix`` is the least-squares fit to these pairs when the caller already has it.
     """
-    r = wahba_svd(obs, ref)
+    r = wahba_svd(obs, ref) if matrix is None else matrix
     res = residuals_arcsec(obs, ref, r)
     rms = float(np.sqrt(np.mean(res**2))) if len(res) else float("nan")
     n = len(obs)

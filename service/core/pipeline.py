@@ -201,24 +201,22 @@ def _near_hint(r: np.ndarray, hint: tuple[Quaternion, float]) -> bool:
 
 def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_rad: float) -> Solution:
     ref = np.asarray(db.stars.vec[v.cat])
-    fit = estimate(obs.vec[v.obs], ref, sigma_rad=None)
+    fit = estimate(obs.vec[v.obs], ref, sigma_rad=None, matrix=v.matrix)
     ra, dec, roll = radec_roll(fit.matrix)
-    cat_ra = np.degrees(np.mod(np.arctan2(ref[:, 1], ref[:, 0]), 2 * np.pi))
-    cat_dec = np.degrees(np.arcsin(np.clip(ref[:, 2], -1, 1)))
     order = np.lexsort((obs.index[v.obs], obs.camera[v.obs]))
-    stars = tuple(
-        StarMatch(
-            centroid=int(obs.index[v.obs[i]]),
-            hip=int(db.stars.hip[v.cat[i]]),
-            ra_deg=float(cat_ra[i]),
-            dec_deg=float(cat_dec[i]),
-            mag=round(float(db.stars.mag[v.cat[i]]), 3),
-            residual_arcsec=round(float(fit.residuals_arcsec[i]), 3),
-            camera=int(obs.camera[v.obs[i]]),
-        )
-        for i in order
+    ref = ref[order]
+    columns = zip(
+        obs.index[v.obs][order].tolist(),
+        db.stars.hip[v.cat][order].tolist(),
+        np.degrees(np.mod(np.arctan2(ref[:, 1], ref[:, 0]), 2 * np.pi)).tolist(),
+        np.degrees(np.arcsin(np.clip(ref[:, 2], -1, 1))).tolist(),
+        np.round(db.stars.mag[v.cat][order].astype(np.float64), 3).tolist(),
+        np.round(fit.residuals_arcsec[order], 3).tolist(),
+        obs.camera[v.obs][order].tolist(),
+        strict=True,
     )
-    q = matrix_to_quat(fit.matrix)
+    stars = tuple(StarMatch(*row) for row in columns)
+    q = fit.quaternion
     return Solution(
         SolveStatus.SOLVED,
         method,

@@ -27,11 +27,17 @@ trackers and wide-field cameras)."""
 
 
 def default_database_dir() -> Path:
-    """``$SKYFIX_DB_DIR`` if set, else ``db/`` at the project root (beside ``service/``)."""
+    """Where the default database lives: ``$SKYFIX_DB_DIR`` if set; else ``db/`` of the source
+    checkout this package runs from (``pip install -e .``); else ``$XDG_CACHE_HOME/skyfix/db``
+    (``~/.cache/skyfix/db``) for a plain install, never inside site-packages."""
     env = os.environ.get("SKYFIX_DB_DIR")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[3] / "db"
+    root = Path(__file__).resolve().parents[3]
+    if (root / "pyproject.toml").is_file() and (root / "service").is_dir():
+        return root / "db"
+    cache = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(cache) / "skyfix" / "db"
 
 
 def ensure_default_database(*, progress: Progress = _noop, build: bool = True) -> Path:

@@ -325,7 +325,8 @@ def check_unique_triangle(
     predicts no further catalogue star inside the image that nobody observed. The density
     ``rho`` is estimated from the database: ``box_cands`` are all catalogue triples (same vertex
     order and handedness) within ``box_halfwidth_rad`` = W of the observed sides; with ``k`` of
-    them consistent with the frame, ``E = k_up (delta / W)^3``, ``k_up`` the Poisson upper
+    them (the match itself left out: given a point of a Poisson process, the others are still
+    Poisson) consistent with the frame, ``E = k_up (delta / W)^3``, ``k_up`` the Poisson upper
     bound on ``k`` at ``SPARSE_CONFIDENCE``. Accepted when the match is unique (the caller's
     duty), its own field is consistent, and ``n_looks * E <= max_false_prob``, ``n_looks`` being
     the number of observed triangles the method could have tried.
@@ -346,19 +347,24 @@ def check_unique_triangle(
     radius = verifier.match_radius_px * obs.pixel_scale_rad
     if np.any(np.linalg.norm(stars[cat_idx] @ r.T - obs.vec[obs_idx], axis=1) > radius):
         return None
-    if _unseen_counts(verifier, r[None], cat_idx[None])[0] > 0:
+    unseen, explained = _field_check(verifier, r[None], cat_idx[None], obs_idx)
+    if unseen[0] > 0:
         return None
     m_obs, m_cat, _ = verifier._match_all(r)
     if not np.all(np.isin(obs_idx, m_obs)):
         return None
     delta = float(np.max(np.abs(pairwise_angles(obs.vec[obs_idx]) - pairwise_angles(stars[cat_idx]))))
     box = np.asarray(box_cands, dtype=np.int64).reshape(-1, 3)
+    box = box[~np.all(box == cat_idx, axis=1)]  # the background around the match, without it
     thin = 1.0
     if len(box) > SPARSE_MAX_SAMPLE:  # a random thinning of a Poisson count is Poisson
         thin = len(box) / SPARSE_MAX_SAMPLE
         box = box[np.random.default_rng(0).choice(len(box), SPARSE_MAX_SAMPLE, replace=False)]
     rs = _sparse_attitudes(obs.vec[obs_idx], stars, box)
-    k = int(np.count_nonzero(_unseen_counts(verifier, rs, box) == 0)) if len(box) else 0
+    k = 0
+    if len(box):
+        box_unseen, box_explained = _field_check(verifier, rs, box, obs_idx)
+        k = int(np.count_nonzero((box_unseen == 0) & (box_explained >= explained[0])))
     expected = thin * float(gammaincinv(k + 1, SPARSE_CONFIDENCE)) * (delta / box_halfwidth_rad) ** 3
     prob = min(1.0, expected * max(n_looks, 1))
     if prob > verifier.max_false_prob:
@@ -381,18 +387,22 @@ def _sparse_attitudes(obs_vec: FloatArray, stars: FloatArray, cands: IntArray) -
     return np.einsum("ij,kmj->kim", o, c)  # R = O C^T
 
 
-def _unseen_counts(verifier: Verifier, rs: FloatArray, cands: IntArray, *, max_near: int = 96) -> IntArray:
-    """For each attitude ``rs[k]``: catalogue stars predicted inside an image (at least one
-    match radius from its edge) that are not in ``cands[k]`` and have no observed star within
-    the match radius: stars the camera should have seen. Vectorised over K; looks at the
-    ``max_near`` catalogue stars nearest each boresight."""
+def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,
+                 obs_idx: IntArray, *, max_near: int = 96) -> tuple[IntArray, IntArray]:
+    """For each attitude ``rs[k]`` with its catalogue triple ``cands[k]`` matched to the
+    observed rows ``obs_idx``: how many catalogue stars it predicts inside an image (at least
+    one match radius from the edge) with no observed star within the match radius (stars the
+    camera should have seen), and how many of the other observed stars it explains (a
+    predicted star within the match radius). Vectorised over K; looks at the ``max_near``
+    catalogue stars nearest each boresight."""
     obs = verifier.obs
     stars = verifier.db.stars.vec
     tree = star_tree(verifier.db)
     rad = verifier.match_radius_px
-    out = np.zeros(len(rs), dtype=np.int64)
+    unseen = np.zeros(len(rs), dtype=np.int64)
+    explained = np.zeros(len(rs), dtype=np.int64)
     if len(rs) == 0:
-        return out
+        return unseen, explained
     for c, cam in enumerate(obs.cameras):
         r_cam = np.einsum("ij,kjl->kil", obs.mountings[c], rs)
         half = math.radians(cam.diagonal_fov_deg / 2 + 0.2)
@@ -405,11 +415,15 @@ def _unseen_counts(verifier: Verifier, rs: FloatArray, cands: IntArray, *, max_n
         star = near[valid]
         v_cam = np.einsum("nij,nj->ni", r_cam[k_of], stars[star])
         pxy, inside = cam.vector_to_pixel(v_cam)
-        inside &= cam.contains(pxy, margin_px=rad)
-        k_of, pxy = k_of[inside], pxy[inside]
-        rows = obs.by_camera[c]
-        if len(rows) and len(pxy):
-            d2 = ((pxy[:, None, :] - obs.xy[rows][None, :, :]) ** 2).sum(axis=2)
-            k_of = k_of[~(d2 <= rad * rad).any(axis=1)]
-        out += np.bincount(k_of, minlength=len(rs))
-    return out
+        k_all, p_all = k_of[inside], pxy[inside]
+        rows = np.setdiff1d(obs.by_camera[c], obs_idx)
+        edge = cam.contains(p_all, margin_px=rad)
+        if len(rows) and len(p_all):
+            close = ((p_all[:, None, :] - obs.xy[rows][None, :, :]) ** 2).sum(axis=2) <= rad * rad
+            seen = close.any(axis=1)
+            kr = np.unique((k_all[:, None] * len(rows) + np.arange(len(rows))[None, :])[close])
+            explained += np.bincount(kr // len(rows), minlength=len(rs))
+        else:
+            seen = np.zeros(len(p_all), bool)
+        unseen += np.bincount(k_all[edge & ~seen], minlength=len(rs))
+    return unseen, explained

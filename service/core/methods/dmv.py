@@ -165,8 +165,8 @@ class Dmv:
             phi[lo:hi] = gaps
             lam[:, s] = pack_bits(map_bits(d[lo:hi], bin_rad, n_bins), n_bins)
         progress(f"{n} patterns, {len(nb)} neighbours", 1.0)
-        tables = {"offsets": offsets, "nb": nb, "dist": dist, "phi": phi, "lam": lam}
-        meta = {"radius_deg": radius_deg, "n_bins": n_bins, "n_neighbours": int(len(nb))}
+        tables: dict[str, np.ndarray] = {"offsets": offsets, "nb": nb, "dist": dist, "phi": phi, "lam": lam}
+        meta: dict[str, Any] = {"radius_deg": radius_deg, "n_bins": n_bins, "n_neighbours": int(len(nb))}
         return tables, meta
 
     def matcher(self, db: NavDatabase) -> DmvMatcher:
@@ -192,7 +192,8 @@ class DmvMatcher:
         self.n_nb = np.diff(self.offsets)
 
     # -- the observed pattern ------------------------------------------------------------------
-    def observed_pattern(self, ctx: SolveContext, ref: int, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def observed_pattern(self, ctx: SolveContext, ref: int,
+                         radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Neighbour rows, distances and CCW position angles of observed star ``ref`` within
         ``radius``, in the paper's order (CCW from the nearest)."""
         v = ctx.obs.vec
@@ -287,20 +288,23 @@ class DmvMatcher:
             eps_cum = np.cumsum(np.roll(phi_obs, -i))[:-1]
             for s in cands:
                 nb, dist, phi = self._catalogue_pattern(int(s))
-                hit = np.flatnonzero((np.abs(dist - d_obs[i]) <= eps) & (np.abs(phi - phi_obs[i]) <= zeta_ang))
-                for j in hit:
-                    e_cum = np.cumsum(np.roll(phi, -j))[:-1]
+                close = (np.abs(dist - d_obs[i]) <= eps) & (np.abs(phi - phi_obs[i]) <= zeta_ang)
+                hit = np.flatnonzero(close)
+                for start in hit:
+                    e_cum = np.cumsum(np.roll(phi, -start))[:-1]
                     p, pairs = greedy_similarity(eps_cum, e_cum, zeta_ang)
                     if best is None or p > best[0]:
-                        best = (p, int(s), int(j), pairs)
+                        best = (p, int(s), int(start), pairs)
             if best is None or best[0] < p_min:
                 continue
-            p, s, j, pairs = best
-            nb, _, _ = self._catalogue_pattern(s)
+            _, star, j, pairs = best
+            nb, _, _ = self._catalogue_pattern(star)
             k, l_ = pairs[len(pairs) // 2]  # a matched neighbour halfway round: a wide triangle
             obs_idx = np.array([ref, rows[i], rows[(i + k + 1) % m]])
-            cat_idx = np.array([s, nb[j], nb[(j + l_ + 1) % len(nb)]])
-            return ctx.verifier.check(obs_idx, cat_idx)
+            cat_idx = np.array([star, nb[j], nb[(j + l_ + 1) % len(nb)]])
+            found = ctx.verifier.check(obs_idx, cat_idx)
+            if found is not None:  # a refused winner is treated like a low P: next (d_i, phi_i)
+                return found
         return None
 
     def _identify_improved(self, ctx: SolveContext, ref: int, r_eff: float) -> Verified | None:

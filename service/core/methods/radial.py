@@ -59,7 +59,8 @@ MAX_NEIGHBOURS = 24
 """Observed neighbours used in a star's feature (the brightest)."""
 
 
-def ring_codes(pairs: np.ndarray, angles: np.ndarray, n_stars: int, ring_rad: float, n_rings: int) -> np.ndarray:
+def ring_codes(pairs: np.ndarray, angles: np.ndarray, n_stars: int, ring_rad: float,
+               n_rings: int) -> np.ndarray:
     """Packed radial features ``(ceil(n_rings / 64), n_stars)`` uint64 from star pairs."""
     n_words = -(-n_rings // 64)
     h = (angles / ring_rad).astype(np.int64)
@@ -131,7 +132,8 @@ class RadialMatcher:
             h = np.unique((dist / self.ring_rad).astype(np.int64))
             score, n_feat, window = self._popcount_and(h), len(h), 1.0
         else:
-            score, n_feat, window = self._matched_neighbours(dist, eps), len(dist), 2 * eps / self.ring_rad + 1
+            score, n_feat = self._matched_neighbours(dist, eps), len(dist)
+            window = 2 * eps / self.ring_rad + 1
         if self.threshold == "fraction":
             rows = np.flatnonzero(score >= max(math.ceil(self.min_fraction * n_feat), 1))
             rank = -score[rows].astype(np.float64)
@@ -152,7 +154,8 @@ class RadialMatcher:
         words = rings >> 6
         uw = np.unique(words)
         obs = np.zeros(len(uw), dtype=np.uint64)
-        np.bitwise_or.at(obs, np.searchsorted(uw, words), np.left_shift(np.uint64(1), (rings & 63).astype(np.uint64)))
+        bit = np.left_shift(np.uint64(1), (rings & 63).astype(np.uint64))
+        np.bitwise_or.at(obs, np.searchsorted(uw, words), bit)
         return np.bitwise_count(self.codes[uw] & obs[:, None]).sum(axis=0, dtype=np.int64)
 
     def _matched_neighbours(self, dist: np.ndarray, eps: float) -> np.ndarray:
@@ -166,8 +169,9 @@ class RadialMatcher:
         one = np.uint64(1)
         # bits lo..end-of-word in the first word, bits 0..hi in the second (when it differs)
         top1 = np.where(w1 == w2, hi & 63, 63).astype(np.uint64)
+        top2 = (hi & 63).astype(np.uint64)
         m1 = ((one << top1) - one + (one << top1)) & ~((one << (lo & 63).astype(np.uint64)) - one)
-        m2 = np.where(w1 == w2, np.uint64(0), (one << (hi & 63).astype(np.uint64)) - one + (one << (hi & 63).astype(np.uint64)))
+        m2 = np.where(w1 == w2, np.uint64(0), (one << top2) - one + (one << top2))
         hit = (self.codes[w1] & m1[:, None]) | (self.codes[w2] & m2[:, None])
         return np.count_nonzero(hit, axis=0)
 
@@ -243,7 +247,8 @@ class RadialMatcher:
             chord = np.linalg.norm(vec[a][:, None, :] - vec[b][None, :, :], axis=2)
             return np.abs(2 * np.arcsin(np.minimum(chord / 2, 1.0)) - target) <= eps
 
-        m = ok(ci, cj, d[0, 1])[:, :, None] & ok(ci, ck, d[0, 2])[:, None, :] & ok(cj, ck, d[1, 2])[None, :, :]
+        m = ok(ci, cj, d[0, 1])[:, :, None] & ok(ci, ck, d[0, 2])[:, None, :]
+        m &= ok(cj, ck, d[1, 2])[None, :, :]
         a, b, c = np.nonzero(m)
         out = np.column_stack([ci[a], cj[b], ck[c]])
         out = out[(out[:, 0] != out[:, 1]) & (out[:, 0] != out[:, 2]) & (out[:, 1] != out[:, 2])]

@@ -65,7 +65,8 @@ def build_kvector(y: np.ndarray) -> tuple[np.ndarray, float, float]:
     return k, m, q
 
 
-def kvector_range(k: np.ndarray, m: float, q: float, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def kvector_range(k: np.ndarray, m: float, q: float, lo: np.ndarray,
+                  hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Index ranges ``[start, end)`` of a k-vector holding every value in ``[lo, hi]``
     (a few extra values at both ends; callers filter by value)."""
     last = len(k) - 1
@@ -121,12 +122,13 @@ class TriangleMatcher:
     def windows(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Row ranges ``[start, end)`` of the pair table with angle in ``[lo, hi]``."""
         if self.kvector is None:
-            return np.searchsorted(self.angles, lo, side="left"), np.searchsorted(self.angles, hi, side="right")
+            y = self.angles
+            return np.searchsorted(y, lo, side="left"), np.searchsorted(y, hi, side="right")
         s, e = kvector_range(self.kvector, *self.kv_line, lo, hi)
         # trim the k-vector's slack by value (a handful of rows at each end)
         seg = [np.asarray(self.angles[a:b]) for a, b in zip(s, e, strict=True)]
-        start = np.array([a + int(np.count_nonzero(y < x)) for a, y, x in zip(s, seg, lo, strict=True)], np.int64)
-        end = np.array([a + int(np.count_nonzero(y <= x)) for a, y, x in zip(s, seg, hi, strict=True)], np.int64)
+        start = np.array([a + np.count_nonzero(y < x) for a, y, x in zip(s, seg, lo, strict=True)], np.int64)
+        end = np.array([a + np.count_nonzero(y <= x) for a, y, x in zip(s, seg, hi, strict=True)], np.int64)
         return start, end
 
     def _edges(self, start: int, end: int) -> np.ndarray:

@@ -20,6 +20,7 @@ from service.core.sim import SimConfig, random_points, simulate_frames
 PRESET = PRESETS["seed003"]
 CAMERA = PRESET.camera
 OPTIONS = SolveOptions(centroid_sigma_px=0.5)
+SIM = SimConfig(mag_limit=PRESET.mag_limit, centroid_noise_px=0.5)
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +70,7 @@ def test_identifies_frames(db: NavDatabase, variant: str) -> None:
     saved = cache.get("dmv")
     cache["dmv"] = m
     try:
-        frames = simulate_frames(CAMERA, 30, SimConfig(mag_limit=PRESET.mag_limit, centroid_noise_px=0.5), rng=31)
+        frames = simulate_frames(CAMERA, 30, SIM, rng=31)
         results = [score(solve(f.centroids, CAMERA, db, method="dmv", options=OPTIONS), f.quaternion,
                          f.hip.tolist(), blends=f.blends) for f in frames]
         assert all(r.correct is not False for r in results)
@@ -82,7 +83,7 @@ def test_identifies_frames(db: NavDatabase, variant: str) -> None:
 
 @pytest.mark.slow
 def test_identifies_99_percent_with_no_wrong_answer(db: NavDatabase) -> None:
-    frames = simulate_frames(CAMERA, 500, SimConfig(mag_limit=PRESET.mag_limit, centroid_noise_px=0.5), rng=2003)
+    frames = simulate_frames(CAMERA, 500, SIM, rng=2003)
     solved = wrong = 0
     for f in frames:
         sol = solve(f.centroids, CAMERA, db, method="dmv", options=OPTIONS)

@@ -94,7 +94,8 @@ def test_classic_brightness_order_solves_too(db: NavDatabase) -> None:
     saved = db.__dict__["_matchers"].get("triangle")
     db.__dict__["_matchers"]["triangle"] = classic
     try:
-        for f in simulate_frames(CAMERA, 20, SimConfig(mag_limit=6.5, centroid_noise_px=0.5, false_stars=1), rng=5):
+        config = SimConfig(mag_limit=6.5, centroid_noise_px=0.5, false_stars=1)
+        for f in simulate_frames(CAMERA, 20, config, rng=5):
             sol = solve(f.centroids, CAMERA, db, method="triangle", options=OPTIONS)
             assert score(sol, f.quaternion, f.hip.tolist(), blends=f.blends).correct is not False
     finally:

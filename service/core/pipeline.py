@@ -109,9 +109,12 @@ def solve_rig(
         raise InvalidInputError("cameras", "at least one camera frame is required")
     if isinstance(db, NavDatabaseSet):
         widest = max((cam for _, cam, _ in frames), key=lambda c: c.diagonal_fov_deg)
-        members = db.for_camera(widest.fov_deg, widest.diagonal_fov_deg)
+        fitting = db.for_camera(widest.fov_deg, widest.diagonal_fov_deg)
+        # search the shallowest fitting member first (bright stars: few, fast, robust), then
+        # refine the answer against the deepest one (more stars, a better attitude)
+        members, deepest = fitting[::-1], fitting[0]
     else:
-        members = [db]
+        members, deepest = [db], db
     method_lists = [resolve(m, method) for m in members]
     mountings = _mountings or [np.eye(3) if m is None else quat_to_matrix(np.asarray(m, float)) for _, _, m in frames]
     obs = _observation(frames, mountings)
@@ -138,11 +141,38 @@ def solve_rig(
     if found is None:
         timings["total"] = (time.perf_counter() - t0) * 1e3
         return Solution(SolveStatus.NO_SOLUTION, used, timings_ms=timings)
+    if deepest is not db:
+        refined = _refine(obs, db, deepest, found, sigma, options)
+        if refined is not None:
+            db, found = deepest, refined
     sol = _solution(obs, db, found, used, sigma * obs.pixel_scale_rad)
     timings["attitude"] = (time.perf_counter() - t2) * 1e3
     timings["total"] = (time.perf_counter() - t0) * 1e3
     object.__setattr__(sol, "timings_ms", timings)
     return sol
+
+
+def _refine(
+    obs: Observation, db: NavDatabase, deeper: NavDatabase, found: Verified, sigma: float, options: SolveOptions
+) -> Verified | None:
+    """Re-verify an answer found in ``db`` against the deeper star table of ``deeper``: its
+    stars that ``deeper`` also holds are the hypothesis, the newly matched ones the evidence,
+    and every hypothesis already tried still counts. None if it adds nothing provable."""
+    hips = np.asarray(db.stars.hip[found.cat])
+    deep_hip = np.asarray(deeper.stars.hip)
+    order = np.argsort(deep_hip)
+    pos = np.minimum(np.searchsorted(deep_hip, hips, sorter=order), len(deep_hip) - 1)
+    rows = order[pos]
+    known = deep_hip[rows] == hips
+    if known.sum() < 3:
+        return None
+    radius = options.match_radius_px or max(2.5, 3.0 * sigma)
+    verifier = Verifier(deeper, obs, match_radius_px=radius, max_false_prob=options.max_false_prob,
+                        trials=found.n_trials)
+    refined = verifier.check(found.obs[known], rows[known], n_trials=found.n_trials)
+    if refined is None or len(refined.obs) <= len(found.obs):
+        return None
+    return refined
 
 
 def _identify(

@@ -112,10 +112,10 @@ class NavDatabaseSet:
     members: dict[str, NavDatabase]
 
     def for_camera(self, fov_deg: float, diagonal_fov_deg: float | None = None) -> list[NavDatabase]:
-        """Members to try for a camera of horizontal field ``fov_deg`` and diagonal
-        ``diagonal_fov_deg`` (degrees), best first: those whose range holds it (side at least
-        ``fov_min_deg``, diagonal at most ``fov_max_deg``), deepest (smallest ``fov_max_deg``)
-        first; if none holds it, the one whose range is nearest."""
+        """Members whose range holds a camera of horizontal field ``fov_deg`` and diagonal
+        ``diagonal_fov_deg`` (degrees): side at least ``fov_min_deg``, diagonal at most
+        ``fov_max_deg``; deepest (smallest ``fov_max_deg``) first. If none holds it, the one
+        whose range is nearest."""
         diag = fov_deg if diagonal_fov_deg is None else diagonal_fov_deg
 
         def gap(db: NavDatabase) -> float:

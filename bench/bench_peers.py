@@ -29,6 +29,7 @@ from __future__ import annotations
 from bench import common  # noqa: I001  (first: pins BLAS threads before numpy loads)
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -225,8 +226,9 @@ def render(res: dict[str, Any], args: argparse.Namespace, info: dict[str, Any], 
            "rotating order; time = in-process wall time of one solve call with the database loaded "
            f"(median and p95 over all frames); budget {common.TIMEOUT_MS:g} ms per solve for all. "
            "Right = attitude within 360\" cross-boresight and 3600\" roll and every matched star the true one "
-           "(a false star paired with a catalogue star is wrong). A cell reads: right % / wrong answers / "
-           "median ms.", ""]
+           "(a false star paired with a catalogue star is wrong). A cell reads: right % / wrong answers "
+           "(of which N att = attitude off; the rest have the right attitude but pair some centroid with the "
+           "wrong star) / median ms.", ""]
     if res["db"]:
         out += ["### Databases", ""]
         head = ["camera", "solver", "build s", "size MB", "open ms", "notes"]
@@ -247,7 +249,8 @@ def render(res: dict[str, Any], args: argparse.Namespace, info: dict[str, Any], 
                 cells = [f"{r['value']:g}"]
                 for n in names:
                     s = r["solvers"][n]
-                    cells.append(f"{fmt(s['rate'], 1, True)} / {s['wrong']} / {fmt(s['ms_median'])}")
+                    w = f"{s['wrong']}" + (f" ({s['wrong_attitude']} att)" if s["wrong"] else "")
+                    cells.append(f"{fmt(s['rate'], 1, True)} / {w} / {fmt(s['ms_median'])}")
                 if sk:
                     ra = r["ratio"]
                     cells.append(f"{fmt(ra.get(sk[0]))} ({ra.get('fastest_peer', '-')})" if ra else "-")
@@ -366,6 +369,13 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--render"]:  # re-render the markdown of an earlier run: --render peers.json [out.md]
+        res = json.loads(Path(argv[1]).read_text())
+        args = argparse.Namespace(**res["args"])
+        md = render(res, args, res["machine"], res["command"])
+        Path(argv[2] if len(argv) > 2 else Path(argv[1]).with_suffix(".md")).write_text(md)
+        return 0
     return run(parse(argv))
 
 

@@ -41,9 +41,14 @@ docs/methods.md):
   or too loose for far ones. The improved match demands ``|d - D| <= zeta_2`` *and* an angle
   within ``tol / d + tol / D`` of the cumulative angle (a 2-D position match), counted
   vectorised over all neighbour pairs.
-- **All start pairs, several reference stars.** Every ``(d_i, phi_i)`` is tried in one pass
-  and the candidates are ranked by ``P``; the best few go to the verifier. When the reference
-  star yields nothing, the next star nearest the centre takes over.
+- **Symmetric dispersion.** ``X`` counts catalogue neighbours the frame lacks, so every
+  catalogue star with few neighbours passes; the improved filter also bounds the observed
+  neighbours that find no catalogue bit by ``floor(m / 3) + 1``.
+- **All start pairs, several reference stars.** The farthest observed neighbours (sharpest
+  angles) are tried as starts in one vectorised pass and the alignments ranked by ``P``; the
+  best few go to the verifier. When the reference star yields nothing, the next star nearest
+  the centre takes over; when the centre is empty (no circle inside the image holds enough
+  stars), the full circle ``R`` is matched on the observed side only.
 """
 
 from __future__ import annotations
@@ -63,6 +68,8 @@ from .base import Progress, SolveContext
 TWO_PI = 2 * math.pi
 MAX_REFERENCES = 4
 """``improved``: reference stars tried, nearest the image centre first."""
+MAX_CANDIDATES = 128
+"""``improved``: at most this many catalogue candidates (the least dispersed) per reference."""
 MAX_PATTERN = 24
 """``improved``: in a dense field the circle shrinks to hold this many observed neighbours."""
 START_NEIGHBOURS = 4
@@ -222,7 +229,7 @@ class DmvMatcher:
 
     # -- step 1: dispersion ----------------------------------------------------------------------
     def dispersion_candidates(self, d_obs: np.ndarray, eps: float, r_eff: float | None,
-                              symmetric: bool = False) -> np.ndarray:
+                              symmetric: bool = False, catalogue_side: bool = True) -> np.ndarray:
         """Catalogue stars with ``X <= floor(m / 3) + 1``; with ``r_eff`` only the bins below it
         count on the catalogue side (the truncated pattern); ``symmetric`` also demands that at
         most ``floor(m / 3) + 1`` *observed* neighbours find no catalogue bit (the paper's
@@ -240,7 +247,7 @@ class DmvMatcher:
             mask = pack_bits(np.arange(top), self.n_bins)
             n_cat = np.bitwise_count(self.lam & mask[:, None]).sum(axis=0, dtype=np.int64)
         allowed = m // 3 + 1
-        ok = n_cat - b <= allowed
+        x = n_cat - b if catalogue_side else np.zeros(len(n_cat), np.int64)
         if symmetric:
             missed = np.zeros(len(n_cat), np.int64)
             for dk in d_obs:  # observed neighbours with no catalogue bit in their window
@@ -248,8 +255,11 @@ class DmvMatcher:
                 ww = np.unique(wb >> 6)
                 hit = (self.lam[ww] & pack_bits(wb, self.n_bins)[ww][:, None]).any(axis=0)
                 missed += ~hit
-            ok &= missed <= allowed
-        return np.flatnonzero(ok)
+            rows = np.flatnonzero((x <= allowed) & (missed <= allowed))
+            if len(rows) > MAX_CANDIDATES:  # the least dispersed first
+                rows = rows[np.argsort(x[rows] + missed[rows], kind="stable")[:MAX_CANDIDATES]]
+            return rows
+        return np.flatnonzero(x <= allowed)
 
     # -- identification ------------------------------------------------------------------------
     def identify(self, ctx: SolveContext) -> Verified | None:
@@ -258,10 +268,23 @@ class DmvMatcher:
         refs = self.reference_stars(ctx)
         if self.variant == "paper":
             return self._identify_paper(ctx, refs[0][0])
+        starved = []
         for ref, edge in refs[:MAX_REFERENCES]:
             if ctx.expired():
                 break
-            found = self._identify_improved(ctx, ref, min(self.radius, edge + ctx.tol_rad))
+            r_eff = min(self.radius, edge + ctx.tol_rad)
+            if len(self.observed_pattern(ctx, ref, r_eff)[0]) < 3:
+                starved.append(ref)
+                continue
+            found = self._identify_improved(ctx, ref, r_eff)
+            if found is not None:
+                return found
+        # an empty centre: the circle inside the image holds too few stars; match the observed
+        # neighbours within R against whatever the catalogue holds (observed side only)
+        for ref in starved:
+            if ctx.expired():
+                break
+            found = self._identify_improved(ctx, ref, self.radius, complete=False)
             if found is not None:
                 return found
         return None
@@ -307,7 +330,10 @@ class DmvMatcher:
                 return found
         return None
 
-    def _identify_improved(self, ctx: SolveContext, ref: int, r_eff: float) -> Verified | None:
+    def _identify_improved(self, ctx: SolveContext, ref: int, r_eff: float, *,
+                           complete: bool = True) -> Verified | None:
+        """One reference star; ``complete``: the circle ``r_eff`` lies inside the image, so
+        the catalogue side of the dispersion counts too."""
         eps = ctx.tol_rad
         rows, d_obs, theta = self.observed_pattern(ctx, ref, r_eff)
         if len(rows) > MAX_PATTERN:  # dense field: shrink the circle to the nearest MAX_PATTERN
@@ -317,7 +343,8 @@ class DmvMatcher:
         m = len(rows)
         if m < 2:
             return None
-        cands = self.dispersion_candidates(d_obs, eps, r_eff, symmetric=True)
+        cands = self.dispersion_candidates(d_obs, eps, r_eff if complete else None, symmetric=True,
+                                           catalogue_side=complete)
         if len(cands) == 0:
             return None
         # all catalogue neighbours of all candidates, flattened (grouped by candidate), with

@@ -34,8 +34,11 @@ angles; both return the same ranges, and ``bench/bench_multifov.py`` times them.
 Where the paper is vague or weak we chose:
 - the reference camera for the distance triangle is the one with the most stars (its votes
   are the strongest), not always camera 0;
-- more attempts with the next-brightest masters (a saturated or false brightest star, which
-  the paper names as the cause of its failures, costs one attempt, not the frame);
+- more attempts, every pair of ranks among the four brightest stars of the reference camera
+  and of the others (a saturated or false brightest star, which the paper names as the cause
+  of its failures, costs one attempt, not the frame), each also trying the two masters alone
+  (an attitude from two stars far apart, screened on the bright stars of every camera) when
+  the triangles fail;
 - ``r`` = 0.5 deg (centroid noise and blends make shorter sides uninformative) and ``R`` = the
   camera's field side;
 - a single-camera frame uses the distance triangle alone.
@@ -100,14 +103,18 @@ class SegmentIndex:
             x = v[lo:hi]
             idx = np.arange(lo, hi, dtype=np.float64)
             slope, icpt = 0.0, float(idx.mean()) if hi > lo else float(lo)
-            if hi - lo >= 2:  # least squares, by hand: degenerate spreads keep a flat line
+            worst = float(np.abs(icpt - idx).max(initial=0.0))
+            if hi - lo >= 2:  # least squares, by hand; kept only where it beats a flat line
                 xm = x - x.mean()
                 var = float(xm @ xm)
                 fit = float(xm @ (idx - idx.mean())) / var if var > 1e-300 else 0.0
-                if np.all(np.isfinite(fit * x)) and abs(fit) * (x[-1] - x[0]) <= 2 * (hi - lo):
-                    slope, icpt = fit, float(idx.mean() - fit * x.mean())
+                b = float(idx.mean() - fit * x.mean())
+                with np.errstate(over="ignore", invalid="ignore"):
+                    w = float(np.abs(fit * x + b - idx).max())
+                if math.isfinite(w) and w < worst:
+                    slope, icpt, worst = fit, b, w
             coef[s] = slope, icpt
-            err[s] = int(math.ceil(np.abs(slope * x + icpt - idx).max(initial=0.0))) + 1
+            err[s] = int(math.ceil(worst)) + 1
         return cls(v, start, coef, err, width)
 
     def position(self, x: np.ndarray) -> IntArray:
@@ -116,7 +123,8 @@ class SegmentIndex:
         (vectorised over the queries)."""
         x = np.atleast_1d(np.asarray(x, np.float64))
         seg = np.clip((x / self.width).astype(np.int64), 0, len(self.coef) - 1)
-        est = np.rint(self.coef[seg, 0] * x + self.coef[seg, 1]).astype(np.int64)
+        fitted = np.clip(self.coef[seg, 0] * x + self.coef[seg, 1], self.start[seg], self.start[seg + 1])
+        est = np.rint(fitted).astype(np.int64)
         err = self.err[seg]
         lo = np.clip(est - err, self.start[seg], self.start[seg + 1])
         hi = np.clip(est + err + 1, self.start[seg], self.start[seg + 1])
@@ -162,12 +170,13 @@ class MultiFovMatcher:
     """Solver over the ``multifov`` tables.
 
     ``index``: ``"segments"`` or ``"searchsorted"``; ``mode``: ``"paper"`` or ``"robust"``
-    (both default to the database's build parameters); ``attempts``: master ranks per camera;
+    (both default to the database's build parameters); ``attempts``: master ranks per camera
+    (the paper: 1, the brightest star; robust: 4, every rank pair of the four brightest);
     ``mount_tol_arcsec``: the mounting calibration's error, added to inter-camera angle
     tolerances."""
 
     def __init__(self, db: NavDatabase, *, index: str | None = None, mode: str | None = None,
-                 attempts: int = 4, mount_tol_arcsec: float = 10.0) -> None:
+                 attempts: int | None = None, mount_tol_arcsec: float = 10.0) -> None:
         t = db.tables["multifov"]
         prm = db.method_params("multifov")
         self.pairs, self.angles = t["pairs"], t["angles"]
@@ -178,7 +187,7 @@ class MultiFovMatcher:
         self.mode = mode or prm.get("mode", "robust")
         if self.index not in ("segments", "searchsorted") or self.mode not in ("paper", "robust"):
             raise ValueError(f"multifov: unknown index/mode {self.index!r}/{self.mode!r}")
-        self.attempts = attempts
+        self.attempts = attempts or (1 if self.mode == "paper" else 4)
         self.mount_tol = math.radians(mount_tol_arcsec / 3600.0)
         self.vec = db.stars.vec
         self.n_stars = len(db.stars)
@@ -257,8 +266,9 @@ class MultiFovMatcher:
 
     def _rank_pairs(self, n_cams: int) -> list[tuple[int, int]]:
         """Brightness ranks ``(reference master, other masters)`` to try, in order: the paper
-        takes the k-th brightest everywhere; ``robust`` mixes ranks, so that one false or
-        saturated star does not spoil the attempts of the other cameras."""
+        takes the brightest of every camera (more attempts: the k-th brightest everywhere);
+        ``robust`` mixes ranks, so that one false or saturated star does not spoil the attempts
+        of the other cameras."""
         k = self.attempts
         if self.mode == "paper":
             return [(r, r) for r in range(k)]

@@ -3,10 +3,12 @@
 Feature of a star: the stars within an angular circle of radius ``r`` around it, and the
 shortest closed tour that starts at the star and visits them all. The radius adapts to the sky:
 ``r0`` (``radius_deg``, 4 deg) by default; fewer than 6 neighbours within ``r0`` -> 5 deg; more
-than 25 -> 2.5 deg (keeps 4-25 stars per pattern). Stored for every catalogue star: the tour
-length (sorted, binary search), the tour's first three stars (the centre, then the centre's
-tour neighbour nearer to it, then the next one) with ``d12``, ``d23`` and, for verification,
-``d13``; the three magnitudes are read from ``stars/mag`` by id rather than stored again.
+than 25 -> 2.5 deg (keeps 4-25 stars per pattern; the paper gives no base radius: at 6.5 Mv,
+4 deg leaves 86% of the stars at ``r0``, 8% go to 5 deg and 6% to 2.5). Stored for every
+catalogue star: the tour length (sorted, binary search), the tour's first three stars (the
+centre, then the centre's tour neighbour nearer to it, then the next one) with ``d12``, ``d23``
+and, for verification, ``d13``; the three magnitudes are read from ``stars/mag`` by id rather
+than stored again.
 
 Identification: candidate masters are the brightest stars farther than ``r`` from every image
 edge (``max_masters`` of them), tried nearest the image centre first; the master's circle gives
@@ -39,8 +41,17 @@ Where the paper is weak, and what ``matching="robust"`` (the default) does inste
   never reject one: the paper fails when magnitudes leave more than one candidate, we let the
   verifier decide.
 
-The observation carries each star's brightness order, not calibrated magnitudes, so the
-magnitude check compares the order of the three stars' brightness with the catalogue's.
+Also (both matchings): candidates are screened on the frame's stars within 5 deg of the master
+and verified with those as part of the hypothesis (``_grow``): in a 20 deg field the verifier's
+own screen, which predicts the brightest stars from the triangle, loses right candidates to the
+lever arm. A circle uses every star in it, not only ``ctx.max_stars``; with a rig, each camera's
+stars are searched on their own. The observation carries each star's brightness order, not
+calibrated magnitudes, so the magnitude check compares the order of the three stars'
+brightness with the catalogue's.
+
+Measured (``bench/bench_pso.py``, docs/methods.md): the deterministic tour makes the catalogue
+and the sky agree; the swarm's tours of 11+ stars often do not, which costs the paper variant
+its rate and ~10x the time.
 """
 
 from __future__ import annotations

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -62,7 +63,7 @@ def main(argv: list[str] | None = None) -> None:
     md = "\n".join([
         "### Real images end to end (decode, detect, identify, attitude)",
         "",
-        f"Command: `{command_line(['bench.bench_real', *(argv or [])])}`  ",
+        f"Command: `{command_line(['bench.bench_real', *(sys.argv[1:] if argv is None else argv)])}`  ",
         f"Machine: {machine_line(info)}",
         "",
         f"{len(solved)} of {len(records)} solved, {len(wrong)} wrong (boresight > 360\" from the reference). "

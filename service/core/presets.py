@@ -31,6 +31,9 @@ class Preset:
             mag_limit=self.mag_limit,
             epoch=epoch,
             methods=methods,
+            # merge doubles as the simulator blends them (service.core.sim.BLEND_DEG), or a
+            # fine-pixel camera sees one centroid where the database keeps two stars
+            double_star_sep_deg=0.03,
         )
 
 

@@ -194,7 +194,7 @@ def render(cam: str, sweep: str, rows: list[dict[str, Any]], nosol: dict[str, An
            f"{'max(noise, 0.1)' if args.sigma == 'matched' else args.sigma}, timeout 500 ms. "
            "Right = solved with attitude within 360\" (cross-boresight) / 3600\" (roll) and every matched star "
            "the true one; wrong = any other solved frame.", "",
-           f"Command: `{cmd}`  ", f"Machine: {machine_line(info)}. Sweep took {secs:.0f} s.", ""]
+           f"Command: `{cmd}`  ", f"Machine: {machine_line(info)}." + (f" Sweep took {secs:.0f} s." if secs == secs else ""), ""]
     head = ["method", "right % (lowest .. highest)", "paper rate", "wrong", "median ms", "p95 ms", "paper time",
             "no-solution median / p95 ms (solved)", "db build s", "tables MB", "first solve ms"]
     body = []
@@ -215,6 +215,20 @@ def render(cam: str, sweep: str, rows: list[dict[str, Any]], nosol: dict[str, An
     out += [f"Database: {dbrep.note}, all methods built in {fmt(dbrep.build_s)} s, {dbrep.size_bytes / 1e6:.1f} MB "
             f"on disk, `open_database` {fmt(dbrep.open_ms)} ms (median of 5, page cache warm). "
             + (f"Skipped: {', '.join(f'{k} ({v})' for k, v in skipped.items())}." if skipped else ""), ""]
+    vals = list(dict.fromkeys(r["value"] for r in rows))
+    head = [sw.label.split(" (")[0]] + methods
+    body = []
+    for v in vals:
+        cells = [f"{v:g}"]
+        for m in methods:
+            r = next((r for r in rows if r["method"] == m and r["value"] == v), None)
+            if r is None:
+                cells.append("-")
+                continue
+            wrong = f" {r['wrong']}w" if r["wrong"] else ""
+            cells.append(f"{fmt(r['rate'], 1, True)}{wrong} / {fmt(r['ms_median'])}")
+        body.append(cells)
+    out += ["Right % (wrong answers, if any) / median ms per frame:", "", md_table(head, body), ""]
     head = ["method", sw.label, "right %", "paper", "solved %", "wrong", "cross-boresight err median \"",
             "median ms", "p95 ms", "frames with < 4 stars"]
     body = [[r["method"], f"{r['value']:g}", fmt(r["rate"], 2, True), paper_cell(r["method"], sweep, r["value"], cam),
@@ -292,6 +306,17 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--render"]:  # re-render an earlier run's markdown: --render methods-<cam>-<sweep>.json
+        import json
+
+        for path in map(Path, argv[1:]):
+            d = json.loads(path.read_text())
+            a = parse(d["command"].split()[3:])
+            md = render(d["camera"], d["sweep"], d["rows"], d["no_solution"], common.DbReport(**d["db"]),
+                        d["skipped"], a, d["machine"], d["command"], float("nan"))
+            path.with_suffix(".md").write_text(md)
+        return 0
     return run(parse(argv))
 
 

@@ -183,7 +183,8 @@ def _identify(
     already tried on this frame (they count in the coincidence bound)."""
     radius = options.match_radius_px or max(2.5, 3.0 * sigma)
     tol = (3.0 * math.sqrt(2.0) * sigma + 0.5) * obs.pixel_scale_rad
-    verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob, trials=trials)
+    verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob, trials=trials,
+                        deadline=deadline)
     used = methods[-1] if methods else ""
     for name in methods:
         ctx = SolveContext(obs, verifier, tol, deadline, options.max_stars)

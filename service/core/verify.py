@@ -21,6 +21,7 @@ ambiguous and refused. A wrong identification is worse than none.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -101,6 +102,8 @@ class Verifier:
     trials: int = 0
     patterns: int = 0
     screen_stars: int = 6
+    deadline: float = math.inf
+    """``time.perf_counter()`` after which no further hypothesis is checked."""
     marginal: list[Verified] = field(default_factory=list)
     _first_marginal_at: int | None = None
 
@@ -149,6 +152,8 @@ class Verifier:
         if len(self.obs) > 3:
             order = order[hits[order] >= 1]
         for row in order[:8]:
+            if time.perf_counter() > self.deadline:
+                break
             found = self.check(obs_tris[row], cands[row])
             if found is not None:
                 return found

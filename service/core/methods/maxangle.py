@@ -245,10 +245,11 @@ def _pattern_array(n: int) -> np.ndarray:
 
 def _chunks(total: int) -> list[int]:
     """Batch sizes over the triangle list: small first (the first triangles usually solve a
-    frame), then doubling, so a hard frame costs few Python round trips."""
+    frame), then doubling up to 16, so a hard frame costs few Python round trips and the time
+    limit is still checked between batches."""
     sizes, size, done = [], 2, 0
     while done < total:
         sizes.append(min(size, total - done))
         done += sizes[-1]
-        size *= 2
+        size = min(2 * size, 16)  # bounded, so the time limit is checked often
     return sizes

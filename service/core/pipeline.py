@@ -115,7 +115,8 @@ def solve_rig(
         members, deepest = fitting[::-1], fitting[0]
     else:
         members, deepest = [db], db
-    method_lists = [resolve(m, method) for m in members]
+    fov = max(cam.fov_deg for _, cam, _ in frames)
+    method_lists = [resolve(m, method, fov_deg=fov) for m in members]
     mountings = _mountings or [np.eye(3) if m is None else quat_to_matrix(np.asarray(m, float)) for _, _, m in frames]
     obs = _observation(frames, mountings)
     t1 = time.perf_counter()

@@ -61,10 +61,18 @@ def get_matcher(db: NavDatabase, name: str) -> Matcher:
     return cache[name]
 
 
-def resolve(db: NavDatabase, name: str) -> list[str]:
-    """Methods to try for ``name`` (``auto`` expands to those ``db`` has, fastest first)."""
+WIDE_FIELD_DEG = 15.0
+WIDE_AUTO_ORDER: tuple[str, ...] = ("pso", "dmv", "maxangle", "pyramid", "triangle")
+"""For fields of ``WIDE_FIELD_DEG`` and more: bench_methods measured ``pso`` and ``dmv`` at 100%
+on the 20-deg camera up to 2 px, where ``maxangle`` and ``pyramid`` fall to about a third."""
+
+
+def resolve(db: NavDatabase, name: str, *, fov_deg: float | None = None) -> list[str]:
+    """Methods to try for ``name``: ``auto`` expands to those ``db`` has, in the order measured
+    best for a camera of horizontal field ``fov_deg``."""
     if name == "auto":
-        order = [m for m in AUTO_ORDER if m in db.tables]
+        first = WIDE_AUTO_ORDER if fov_deg is not None and fov_deg >= WIDE_FIELD_DEG else AUTO_ORDER
+        order = [m for m in first if m in db.tables]
         order += [m for m in method_names() if m in db.tables and m not in order]
         return order
     get_method(name)
@@ -73,4 +81,4 @@ def resolve(db: NavDatabase, name: str) -> list[str]:
     return [name]
 
 
-__all__ = ["AUTO_ORDER", "Matcher", "Method", "SolveContext", "get_matcher", "get_method", "method_names", "resolve"]
+__all__ = ["AUTO_ORDER", "WIDE_AUTO_ORDER", "Matcher", "Method", "SolveContext", "get_matcher", "get_method", "method_names", "resolve"]

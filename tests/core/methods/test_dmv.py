@@ -15,7 +15,8 @@ from service.core.methods.dmv import DmvMatcher, greedy_similarity, map_bits, po
 from service.core.navdb import NavDatabase, build_database, open_database
 from service.core.pipeline import SolveOptions, solve
 from service.core.presets import PRESETS
-from service.core.sim import SimConfig, random_points, simulate_frames
+from service.core.sim import SimConfig, simulate_frames
+from tests.core.acceptance import assert_refuses_random_points, tally
 
 PRESET = PRESETS["seed003"]
 CAMERA = PRESET.camera
@@ -84,21 +85,14 @@ def test_identifies_frames(db: NavDatabase, variant: str) -> None:
 @pytest.mark.slow
 def test_identifies_99_percent_with_no_wrong_answer(db: NavDatabase) -> None:
     frames = simulate_frames(CAMERA, 500, SIM, rng=2003)
-    solved = wrong = 0
-    for f in frames:
-        sol = solve(f.centroids, CAMERA, db, method="dmv", options=OPTIONS)
-        s = score(sol, f.quaternion, f.hip.tolist(), blends=f.blends)
-        solved += s.solved
-        wrong += s.solved and not s.correct
+    solved, wrong = tally(frames, CAMERA, db, "dmv", OPTIONS)
     assert wrong == 0
     assert solved >= 0.99 * len(frames)
 
 
 @pytest.mark.slow
 def test_random_points_never_solve(db: NavDatabase) -> None:
-    for i in range(200):
-        pts = random_points(CAMERA, 3 + i % 28, rng=30_000 + i)
-        assert not solve(pts, CAMERA, db, method="dmv", options=OPTIONS).solved
+    assert_refuses_random_points(CAMERA, db, "dmv", seed=30_000, options=OPTIONS)
 
 
 def test_matcher_is_registered(db: NavDatabase) -> None:

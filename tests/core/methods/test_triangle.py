@@ -15,8 +15,9 @@ from service.core.methods import get_matcher
 from service.core.methods.triangle import TriangleMatcher, build_kvector, kvector_range
 from service.core.navdb import NavDatabase, build_database, open_database
 from service.core.pipeline import SolveOptions, solve
-from service.core.sim import SimConfig, random_points, simulate_frames
+from service.core.sim import SimConfig, simulate_frames
 from tests.conftest import SEED000_CAMERA, seed000_config
+from tests.core.acceptance import assert_refuses_random_points, tally
 
 CAMERA = SEED000_CAMERA
 OPTIONS = SolveOptions(centroid_sigma_px=0.5)
@@ -71,21 +72,14 @@ def test_triples_hold_the_true_triangle(db: NavDatabase) -> None:
 
 @pytest.mark.slow
 def test_identifies_99_percent_with_no_wrong_answer(db: NavDatabase, frames) -> None:
-    solved = wrong = 0
-    for f in frames:
-        sol = solve(f.centroids, CAMERA, db, method="triangle", options=OPTIONS)
-        s = score(sol, f.quaternion, f.hip.tolist(), blends=f.blends)
-        solved += s.solved
-        wrong += s.solved and not s.correct
+    solved, wrong = tally(frames, CAMERA, db, "triangle", OPTIONS)
     assert wrong == 0
     assert solved >= 0.99 * len(frames)
 
 
 @pytest.mark.slow
 def test_random_points_never_solve(db: NavDatabase) -> None:
-    for i in range(200):
-        pts = random_points(CAMERA, 3 + i % 28, rng=10_000 + i)
-        assert not solve(pts, CAMERA, db, method="triangle", options=OPTIONS).solved
+    assert_refuses_random_points(CAMERA, db, "triangle", seed=10_000, options=OPTIONS)
 
 
 def test_classic_brightness_order_solves_too(db: NavDatabase) -> None:

@@ -26,21 +26,32 @@ twice and compare.
 
 from __future__ import annotations
 
-from bench import common  # noqa: I001  (first: pins BLAS threads before numpy loads)
-
 import argparse
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
+from bench import common  # noqa: I001  (first: pins BLAS threads before numpy loads)
+from bench.common import (
+    OUT,
+    PRESETS,
+    SWEEPS,
+    SkyfixSolver,
+    build_skyfix_db,
+    fmt,
+    judge,
+    machine_info,
+    machine_line,
+    md_table,
+    measure_open,
+    random_point_frames,
+    scenarios,
+    summarize,
+    write_json,
+)
 from service.core.methods import method_names
 from service.core.navdb import open_database
-
-from bench.common import (
-    OUT, PRESETS, SWEEPS, SkyfixSolver, build_skyfix_db, fmt, judge, machine_info, machine_line, md_table,
-    measure_open, random_point_frames, scenarios, summarize, write_json,
-)
 
 PAPER: dict[str, dict[str, Any]] = {
     "maxangle": {

@@ -26,8 +26,6 @@ Scoring is the same for all (``bench.common.judge``). Outputs ``bench/out/peers.
 
 from __future__ import annotations
 
-from bench import common  # noqa: I001  (first: pins BLAS threads before numpy loads)
-
 import argparse
 import json
 import sys
@@ -35,17 +33,30 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bench import common  # noqa: I001  (first: pins BLAS threads before numpy loads)
+from bench.common import (
+    OUT,
+    PRESETS,
+    REAL_DIR,
+    SWEEPS,
+    SkyfixSolver,
+    build_skyfix_db,
+    fmt,
+    judge,
+    machine_info,
+    machine_line,
+    md_table,
+    measure_open,
+    real_frames,
+    scenarios,
+    summarize,
+    write_json,
+)
+from bench.peers import StarRows, tetra3rs_peer
+from bench.peers import cedar as cedar_mod
 from service.core.catalog import load_hipparcos, select_stars
 from service.core.methods import method_names
 from service.core.navdb import BuildConfig, build_database, open_database
-
-from bench.common import (
-    OUT, PRESETS, REAL_DIR, SWEEPS, SkyfixSolver, build_skyfix_db, fmt, judge, machine_info, machine_line,
-    md_table, measure_open, real_frames, scenarios, summarize, write_json,
-)
-from bench.peers import StarRows
-from bench.peers import cedar as cedar_mod
-from bench.peers import tetra3rs_peer
 
 REAL_FOV = (6.0, 26.0)
 """Horizontal fields of the real images: 6.07 deg (openstartracker) to 25.4 deg (img_7660)."""

@@ -16,7 +16,6 @@ import time
 from pathlib import Path
 
 from bench.common import OUT, REAL_DIR, command_line, fmt, machine_info, machine_line, md_table, write_json
-
 from service.core.camera import Camera  # noqa: E402
 from service.core.centroid import load_image  # noqa: E402
 from service.core.evaluate import attitude_error  # noqa: E402

@@ -19,8 +19,7 @@ from client.models import AttitudeHint, CameraSpec, SolveRequest
 
 from ..core import pipeline
 from ..core.camera import Camera
-from ..core.errors import InvalidInputError
-from ..core.errors import UnknownMethodError
+from ..core.errors import InvalidInputError, UnknownMethodError
 from ..core.methods import get_method
 from ..core.navdb import NavDatabase, NavDatabaseSet
 from ..core.pipeline import SolveOptions

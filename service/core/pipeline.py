@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .attitude import ARCSEC_PER_RAD, estimate, matrix_to_quat, quat_to_matrix, radec_roll
+from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
 from .camera import Camera
 from .errors import InvalidInputError
 from .methods import SolveContext, get_matcher, resolve

@@ -20,7 +20,6 @@ from .camera import Camera
 from .catalog import StarTable, load_hipparcos, select_stars
 from .types import Centroids
 
-
 BLEND_PX = 2.0
 """Stars closer than this many pixels land in one blob: the simulator reports them as one."""
 BLEND_DEG = 0.03

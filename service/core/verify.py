@@ -29,8 +29,8 @@ from scipy.spatial import cKDTree
 from scipy.special import betainc
 
 from .attitude import ARCSEC_PER_RAD, wahba_svd
-from .geometry import cross
 from .camera import Camera
+from .geometry import cross
 from .navdb.reader import NavDatabase
 from .types import FloatArray, IntArray
 

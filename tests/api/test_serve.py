@@ -10,7 +10,6 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import httpx
-import pytest
 from websockets.sync.client import connect
 
 from service.core.sim import SimFrame

@@ -13,8 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench import common
-from bench import bench_methods, bench_peers
+from bench import bench_methods, bench_peers, common
 from service.core.navdb import build_database
 from service.core.presets import PRESETS
 

@@ -20,7 +20,14 @@ from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
 from ..verify import Verified
-from ._pairs import build_pair_table, directed_edges, edge_keys, join_triangles, pattern_order, same_handedness
+from ._pairs import (
+    build_pair_table,
+    directed_edges,
+    edge_keys,
+    join_triangles,
+    pattern_order,
+    same_handedness,
+)
 from .base import Progress, SolveContext
 
 MAX_CANDIDATES = 1000

@@ -12,7 +12,15 @@ import numpy as np
 
 from ..catalog import StarTable
 from ..errors import DatabaseCorruptError, DatabaseMissingError
-from .format import FORMAT_NAME, MANIFEST, SCHEMA_VERSION, SET_FORMAT_NAME, STAR_ARRAYS, array_file, sha256_file
+from .format import (
+    FORMAT_NAME,
+    MANIFEST,
+    SCHEMA_VERSION,
+    SET_FORMAT_NAME,
+    STAR_ARRAYS,
+    array_file,
+    sha256_file,
+)
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 from .camera import Camera
 from .navdb.builder import BuildConfig
+from .sim import BLEND_DEG
 
 
 @dataclass(frozen=True)
@@ -33,7 +34,7 @@ class Preset:
             methods=methods,
             # merge doubles as the simulator blends them (service.core.sim.BLEND_DEG), or a
             # fine-pixel camera sees one centroid where the database keeps two stars
-            double_star_sep_deg=0.03,
+            double_star_sep_deg=BLEND_DEG,
         )
 
 

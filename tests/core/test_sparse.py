@@ -7,16 +7,14 @@ dangerous case: 1000 of them must all be refused."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from service.core.evaluate import score
-from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
+from service.core.navdb import NavDatabase, build_database, open_database
 from service.core.pipeline import SolveOptions, solve
 from service.core.presets import PRESETS
-from service.core.sim import BLEND_DEG, SimConfig, random_points, simulate_frames
+from service.core.sim import SimConfig, random_points, simulate_frames
 from service.core.types import Centroids
 
 PRESET = PRESETS["seed002"]
@@ -25,17 +23,11 @@ OPTIONS = SolveOptions(centroid_sigma_px=0.5)
 
 
 
-def config(methods: tuple[str, ...]) -> BuildConfig:
-    """The preset's database, with doubles merged like the simulator's blends (``BLEND_DEG`` =
-    0.03 deg; the default 0.02 keeps pairs 20-30 px apart that the simulator reports as one
-    centroid, and such frames, ~1%, are unsolvable by every method)."""
-    return dataclasses.replace(PRESET.build_config(methods), double_star_sep_deg=BLEND_DEG)
-
 
 @pytest.fixture(scope="module")
 def db(tmp_path_factory: pytest.TempPathFactory) -> NavDatabase:
     path = tmp_path_factory.mktemp("sparse") / "seed002"
-    build_database(path, config(("triangle",)))
+    build_database(path, PRESET.build_config(("triangle",)))
     return open_database(path)
 
 

@@ -9,7 +9,6 @@ asserted on the frames with at least four stars; no wrong answer on any frame.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -19,10 +18,10 @@ from service.core.evaluate import score
 from service.core.geometry import pairwise_angles
 from service.core.methods import get_matcher
 from service.core.methods.radial import RadialMatcher, ring_codes
-from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
+from service.core.navdb import NavDatabase, build_database, open_database
 from service.core.pipeline import SolveOptions, solve
 from service.core.presets import PRESETS
-from service.core.sim import BLEND_DEG, SimConfig, simulate_frames
+from service.core.sim import SimConfig, simulate_frames
 from tests.core.acceptance import assert_refuses_random_points
 
 PRESET = PRESETS["seed002"]
@@ -32,17 +31,11 @@ TOL = (3 * math.sqrt(2) * 0.5 + 0.5) * CAMERA.pixel_scale_rad
 
 
 
-def config(methods: tuple[str, ...]) -> BuildConfig:
-    """The preset's database, with doubles merged like the simulator's blends (``BLEND_DEG`` =
-    0.03 deg; the default 0.02 keeps pairs 20-30 px apart that the simulator reports as one
-    centroid, and such frames, ~1%, are unsolvable by every method)."""
-    return dataclasses.replace(PRESET.build_config(methods), double_star_sep_deg=BLEND_DEG)
-
 
 @pytest.fixture(scope="module")
 def db(tmp_path_factory: pytest.TempPathFactory) -> NavDatabase:
     path = tmp_path_factory.mktemp("radial") / "seed002"
-    build_database(path, config(("radial",)))
+    build_database(path, PRESET.build_config(("radial",)))
     return open_database(path)
 
 

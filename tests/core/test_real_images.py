@@ -25,11 +25,10 @@ from tests.conftest import ROOT
 REAL = Path(os.environ.get("SKYFIX_REAL_DATA", ROOT.parent / "shared" / "data" / "real"))
 pytestmark = pytest.mark.skipif(not (REAL / "truth.json").is_file(), reason=f"real images absent ({REAL})")
 
-KNOWN_HARD = {
-    "cedar-solve/tree.jpg": "branches cover most of the field: 4 of the 20 brightest detections are stars,"
-    " too few matches among 150 detections to beat the coincidence bound",
-}
-"""Images we do not solve yet, and why. A wrong answer on them is still a failure."""
+KNOWN_HARD: dict[str, str] = {}
+"""Images we do not solve yet, and why. A wrong answer on them is still a failure. (tree.jpg,
+where branches cover a third of the field, left this list when detection learnt to reject
+non-stellar blobs: service/core/centroid/stellar.py.)"""
 
 
 def _truth() -> dict:
@@ -49,7 +48,8 @@ def _options(name: str) -> SolveOptions:
     """What a user of each camera would say: the openstartracker stars sit near the noise floor
     and centroid to about 1 px, the others to well under. A generous time limit keeps the test
     independent of machine load (the service's default is 500 ms)."""
-    return SolveOptions(centroid_sigma_px=1.5 if name.startswith("openstartracker/") else 1.0, timeout_ms=10_000)
+    sigma = 1.5 if name.startswith("openstartracker/") else 1.0
+    return SolveOptions(centroid_sigma_px=sigma, timeout_ms=10_000)
 
 
 @pytest.mark.real

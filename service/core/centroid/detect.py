@@ -16,10 +16,13 @@ The chain (after the seed paper's "filtering, threshold segmentation, connected 
 5. Reject sources of implausible blob area and **hot pixels**: a spike whose 8 neighbours hold
    almost nothing, relative to it (``1 - mean8 / centre > max_sharpness``) or within their noise.
    Flag **saturated** sources.
-6. **Centroid**: Gaussian-windowed centroid of the background-subtracted raw pixels (SExtractor's
+6. Reject **non-stellar blobs**: sources whose SNR is below ``min_significance_ratio`` of what
+   a compact source of the same flux reaches in this frame (wider than the PSF, or in clutter
+   such as lit foliage; :mod:`.stellar`).
+7. **Centroid**: Gaussian-windowed centroid of the background-subtracted raw pixels (SExtractor's
    ``XWIN``: unbiased for symmetric PSFs, near-optimal noise), started from the blob's centre of
    light; a lone saturated blob keeps its centre of light.
-7. Sort by windowed flux (brightest first) and keep ``max_stars``.
+8. Sort by windowed flux (brightest first) and keep ``max_stars``.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from ..types import Centroids
 from .background import tile_statistics
 from .blobs import find_sources
 from .measure import gather_stamps, psf_sigma_from_stamps, sharpness, windowed_centroid
+from .stellar import significance_deficit
 
 __all__ = ["Detections", "extract"]
 
@@ -109,6 +113,7 @@ def extract(
     saturation: float | None = None,
     max_sharpness: float | None = 0.95,
     window_sigma_px: float | None = None,
+    min_significance_ratio: float | None = 0.4,
 ) -> Detections:
     """Detect stars and measure their sub-pixel centroids.
 
@@ -137,6 +142,10 @@ def extract(
     window_sigma_px : float or None
         Sigma (px) of the centroiding window; default ``max(1.2, 0.9 * PSF sigma)`` with the PSF
         sigma estimated from the most significant stars.
+    min_significance_ratio : float or None
+        Reject unsaturated sources whose ``snr / flux`` is below this fraction of the frame's
+        reference (the 90th percentile over sources of SNR >= 10): blobs wider than the PSF or
+        in clutter (branches, lit foliage). ``None`` keeps them.
 
     Returns
     -------
@@ -150,7 +159,7 @@ def extract(
     """
     img = _validate_image(image)
     _check_knobs(sigma_threshold, filter_sigma_px, background_kernel_px, min_area_px, max_area_px,
-                 max_stars, max_sharpness, window_sigma_px)
+                 max_stars, max_sharpness, window_sigma_px, min_significance_ratio)
     height, width = img.shape
     tile = int(background_kernel_px)
     raw_grid = tile_statistics(img, tile_px=tile)
@@ -234,6 +243,8 @@ def extract(
         xy[idx, 0] = px[idx] + np.where(ok, xw, x0)
         xy[idx, 1] = py[idx] + np.where(ok, yw, y0)
         flux[idx] = weighted * (psf_sigma**2 + sig**2) / sig**2  # total of a Gaussian star
+    if min_significance_ratio is not None:
+        star &= ~significance_deficit(snr, flux, star & ~saturated, min_ratio=min_significance_ratio)
 
     sel = np.flatnonzero(star)
     sel = sel[np.argsort(-flux[sel], kind="stable")]
@@ -274,7 +285,7 @@ def _validate_image(image: NDArray[Any]) -> NDArray[Any]:
 
 def _check_knobs(sigma_threshold: float, filter_sigma_px: float | None, background_kernel_px: int,
                  min_area_px: int, max_area_px: int, max_stars: int | None, max_sharpness: float | None,
-                 window_sigma_px: float | None) -> None:
+                 window_sigma_px: float | None, min_significance_ratio: float | None) -> None:
     def bad(name: str, msg: str) -> InvalidInputError:
         return InvalidInputError(name, msg)
 
@@ -292,6 +303,8 @@ def _check_knobs(sigma_threshold: float, filter_sigma_px: float | None, backgrou
         raise bad("max_sharpness", "must be in (0, 1] or None")
     if window_sigma_px is not None and not (math.isfinite(window_sigma_px) and 0.2 <= window_sigma_px <= 20):
         raise bad("window_sigma_px", "must be in [0.2, 20] px or None")
+    if min_significance_ratio is not None and not 0 < min_significance_ratio <= 1:
+        raise bad("min_significance_ratio", "must be in (0, 1] or None")
 
 
 def _float_floor(img: NDArray[Any]) -> float:

@@ -319,15 +319,46 @@ def tan_wcs(r: np.ndarray, camera: Camera) -> dict[str, Any]:
 
 
 def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
-    """Build every matcher and the star k-d tree of ``db`` (or of each member of a set) now,
-    so the first solve of a server worker is as fast as the rest."""
-    from .verify import star_tree
+    """Build every matcher, the star k-d tree and sky grid of ``db`` (or of each member of a
+    set), and solve one frame of its own stars with each method, so that numba's kernels are
+    compiled (or loaded from its on-disk cache) and the first request of a server worker is
+    as fast as the rest."""
+    from .verify import sky_grid, star_tree
 
     members = db.members.values() if isinstance(db, NavDatabaseSet) else [db]
     for member in members:
         star_tree(member)
+        sky_grid(member)
+        camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
         for name in member.methods:
             get_matcher(member, name)
+            if name == "multifov":
+                continue  # a rig method; its kernels are the verifier's, warmed by the others
+            for centroids in _own_frames(member, camera):
+                if solve(centroids, camera, member, method=name).status is SolveStatus.SOLVED:
+                    break
+
+
+def _own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centroids]:
+    """Noise-free frames of ``db``'s own brightest stars around a few of them (for
+    :func:`warm_up`)."""
+    from .attitude import matrix_from_radec_roll
+    from .verify import star_tree
+
+    stars = db.stars
+    mag = np.asarray(stars.mag, dtype=np.float64)
+    frames = []
+    for row in np.argsort(mag)[: 50 : 50 // n_tries]:
+        v = np.asarray(stars.vec[row], dtype=np.float64)
+        ra = math.degrees(math.atan2(v[1], v[0])) % 360
+        dec = math.degrees(math.asin(max(-1.0, min(1.0, v[2]))))
+        r = matrix_from_radec_roll(ra, dec, 0.0)
+        near = np.asarray(star_tree(db).query_ball_point(v, math.radians(camera.diagonal_fov_deg)), dtype=np.int64)
+        xy, inside = camera.vector_to_pixel(np.asarray(stars.vec[near]) @ r.T)
+        near, xy = near[inside], xy[inside]
+        order = np.argsort(mag[near])[:20]
+        frames.append(Centroids(xy[order], 10.0 ** (-0.4 * mag[near][order])))
+    return frames
 
 
 __all__ = ["ARCSEC_PER_RAD", "DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_image", "solve_rig", "tan_wcs", "warm_up"]

@@ -32,6 +32,8 @@ from .attitude import ARCSEC_PER_RAD, wahba_svd
 from .camera import Camera
 from .geometry import cross
 from .navdb.reader import NavDatabase
+from .screen import camera_kernel_params, project_and_pair, screen_hits
+from .skygrid import SkyGrid, build_sky_grid
 from .types import FloatArray, IntArray
 
 
@@ -149,8 +151,7 @@ class Verifier:
         others = np.arange(min(len(self.obs), self.screen_stars + 3))
         hits = self._screen(obs_tris, cands, others)
         order = np.argsort(-hits, kind="stable")
-        if len(self.obs) > 3:
-            order = order[hits[order] >= 1]
+        order = order[hits[order] >= (1 if len(self.obs) > 3 else 0)]
         for row in order[:8]:
             if time.perf_counter() > self.deadline:
                 break
@@ -161,18 +162,10 @@ class Verifier:
 
     def _screen(self, obs_tris: IntArray, cands: IntArray, others: IntArray) -> IntArray:
         """Hits per candidate: ``others`` (observed rows not in its triangle) that land near a
-        catalogue star under the candidate's attitude."""
-        stars = self.db.stars.vec
-        o = triangle_frames(self.obs.vec[obs_tris])  # (K, 3, 3)
-        c = triangle_frames(stars[cands])
-        # v_obs = O C^T v_icrs, so v_icrs = C O^T v_obs
-        local = np.einsum("kji,mj->kmi", o, self.obs.vec[others])  # O^T v, (K, m, 3)
-        pred = np.einsum("kij,kmj->kmi", c, local)  # (K, m, 3)
+        catalogue star under the candidate's attitude; -1 for a mirror image (compiled:
+        :func:`~service.core.screen.screen_hits`)."""
         radius = 1.5 * self.match_radius_px * self.obs.pixel_scale_rad
-        dist, _ = star_tree(self.db).query(pred.reshape(-1, 3), k=1, distance_upper_bound=radius)
-        near = np.isfinite(dist).reshape(len(cands), len(others))
-        own = (obs_tris[:, :, None] == others[None, None, :]).any(axis=1)
-        return (near & ~own).sum(axis=1)
+        return screen_hits(self.obs.vec, obs_tris, cands, others, sky_grid(self.db), radius)
 
     def check(self, obs_idx: IntArray, cat_idx: IntArray, *, n_trials: int | None = None) -> Verified | None:
         """Verify a hypothesis pairing ``obs_idx`` rows with catalogue rows ``cat_idx``.
@@ -238,24 +231,13 @@ class Verifier:
             r_cam = obs.mountings[c] @ r_body
             half = math.radians(cam.diagonal_fov_deg / 2 + 0.2)
             near = np.asarray(star_tree(self.db).query_ball_point(r_cam[2], 2 * math.sin(half / 2)), dtype=np.int64)
-            pxy, inside = cam.vector_to_pixel(stars[near] @ r_cam.T)
-            near, pxy = near[inside], pxy[inside]
-            area += cam.width * cam.height
-            covered += len(near) * math.pi * rad2
             rows = obs.by_camera[c]
-            if len(rows) == 0 or len(near) == 0:
-                continue
-            d2 = ((obs.xy[rows, None, :] - pxy[None, :, :]) ** 2).sum(axis=2)
-            close = d2 <= rad2
-            # unambiguous pairs only: within the radius, and no other candidate on either side
-            # within twice the radius (a false star beside a real one, a catalogue double, or a
-            # noisy star nearer its neighbour's prediction than its own proves nothing)
-            crowd = d2 <= 4 * rad2
-            single = (crowd.sum(axis=1) == 1)[:, None] & (crowd.sum(axis=0) == 1)[None, :] & close
-            ok = single.any(axis=1)
-            best_cat = single.argmax(axis=1)
-            all_obs.append(rows[ok])
-            all_cat.append(near[best_cat[ok]])
+            pair_obs, pair_cat, n_inside = project_and_pair(stars[near] @ r_cam.T, camera_kernel_params(cam),
+                                                            obs.xy[rows], self.match_radius_px)
+            area += cam.width * cam.height
+            covered += n_inside * math.pi * rad2
+            all_obs.append(rows[pair_obs])
+            all_cat.append(near[pair_cat])
         if not all_obs:
             return np.zeros(0, np.int64), np.zeros(0, np.int64), 1.0
         return np.concatenate(all_obs), np.concatenate(all_cat), covered / max(area, 1.0)
@@ -276,17 +258,13 @@ def star_tree(db: NavDatabase) -> cKDTree:
     return cache["tree"]
 
 
-def triangle_frames(tri: FloatArray) -> FloatArray:
-    """Orthonormal frames ``(K, 3, 3)`` (columns) of star triangles ``(K, 3, 3)``: first axis
-    the triangle's mean direction, second towards its first vertex. Two frames of the same
-    triangle seen in two coordinate systems give the rotation between them, with errors
-    averaged over the three stars (TRIAD anchored on one star is ~3x worse far from it)."""
-    t1 = tri.sum(axis=1)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = cross(t1, tri[:, 0])
-    t2 /= np.linalg.norm(t2, axis=1, keepdims=True)
-    t3 = cross(t1, t2)
-    return np.stack([t1, t2, t3], axis=2)
+def sky_grid(db: NavDatabase) -> SkyGrid:
+    """The database's stars on a :class:`~service.core.skygrid.SkyGrid`, built once per
+    opened database."""
+    cache = db.__dict__.setdefault("_cache", {})
+    if "grid" not in cache:
+        cache["grid"] = build_sky_grid(np.asarray(db.stars.vec))
+    return cache["grid"]
 
 
 def batch_wahba(obs: FloatArray, ref: FloatArray) -> FloatArray:

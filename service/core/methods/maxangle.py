@@ -27,12 +27,13 @@ import math
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
 from ..verify import Verified
-from ._pairs import build_pair_table, pattern_order, same_handedness_many
+from ._pairs import build_pair_table, pattern_order
 from .base import Progress, SolveContext
 
 THETA_LO = math.pi / 3
@@ -146,63 +147,34 @@ class MaxAngleMatcher:
         Returns ``labels`` (T, 3) observed rows as (max, sec, thi) vertices, ``sides`` (T, 3)
         ``a >= b >= c`` radians, ``theta`` (T,) and its tolerance ``tol`` (T,).
         """
-        n = len(d)
-        tri = _pattern_array(n)
-        i, j, k = tri[:, 0], tri[:, 1], tri[:, 2]
-        sides, labels = _sorted_sides(d[j, k], d[i, k], d[i, j], i, j, k)
-        a, b, c = sides[:, 0], sides[:, 1], sides[:, 2]
-        theta = triangle_features(a, b, c)
-        ok = (a <= self.d_max - eps) & (c >= self.xi + eps) & (c >= 4 * eps) & (theta <= THETA_MAX_USABLE)
-        sides, labels, theta = sides[ok], labels[ok], theta[ok]
-        order = np.arange(len(theta), dtype=np.float64)
-        # noise may swap which vertex is ID_max / ID_sec (a ~ b) or ID_sec / ID_thi (b ~ c)
-        ab = sides[:, 0] - sides[:, 1] < 2 * eps
-        extra_l = [labels, labels[ab][:, [1, 0, 2]]]
-        extra_o = [order, order[ab] + 0.25]
-        bc = sides[:, 1] - sides[:, 2] < 2 * eps
-        extra_l += [labels[bc][:, [0, 2, 1]], labels[ab & bc][:, [1, 2, 0]]]
-        extra_o += [order[bc] + 0.5, order[ab & bc] + 0.75]
-        src = np.concatenate([np.arange(len(theta))[m] for m in (np.ones(len(theta), bool), ab, bc, ab & bc)])
-        labels = np.concatenate(extra_l)
-        keyorder = np.argsort(np.concatenate(extra_o), kind="stable")
-        labels, src = labels[keyorder], src[keyorder]
-        sides, theta = sides[src], theta[src]
-        a, b, c = sides[:, 0], sides[:, 1], sides[:, 2]
-        sn = np.maximum(np.sin(theta), 1e-3)
-        cs = np.cos(theta)
-        tol = eps * (a + np.abs(c - b * cs) + np.abs(b - c * cs)) / (b * c * sn)  # |d theta / d side| summed
+        tri = _pattern_array(len(d))
+        labels, sides, theta, tol = _observed_triangles(np.ascontiguousarray(d, dtype=np.float64), tri, float(eps),
+                                                        self.d_max, self.xi)
         # the paper's advice, made quantitative: best-conditioned triangles first (the
         # tolerance on theta_max sets how many catalogue triangles a query returns)
         first = np.argsort(tol, kind="stable")
         return labels[first], sides[first], theta[first], tol[first]
 
-    def query_many(self, sides: np.ndarray, theta: np.ndarray, tol: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    def query_many(self, sides: np.ndarray, theta: np.ndarray, tol: np.ndarray, eps: float,
+                   labels: np.ndarray | None = None, obs_vec: np.ndarray | None = None,
+                   max_per_triangle: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Record rows matching each observed triangle; returns ``(rows, which)`` with
-        ``which`` the index of the observed triangle of each row."""
-        blk_lo = np.clip((self.n_blocks * (theta - tol - THETA_LO) / THETA_SPAN).astype(np.int64), 0, self.n_blocks - 1)
-        blk_hi = np.clip((self.n_blocks * (theta + tol - THETA_LO) / THETA_SPAN).astype(np.int64), 0, self.n_blocks - 1)
-        nb = blk_hi - blk_lo + 1
-        t_of_block = np.repeat(np.arange(len(theta)), nb)
-        blocks = blk_lo[t_of_block] + (np.arange(int(nb.sum())) - np.repeat(np.cumsum(nb) - nb, nb))
-        b = sides[t_of_block, 1]
-        starts = np.searchsorted(self.key, blocks + (b - eps) / self.b_scale, side="left")
-        ends = np.searchsorted(self.key, blocks + (b + eps) / self.b_scale, side="right")
-        counts = ends - starts
-        total = int(counts.sum())
-        if total == 0:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        rows = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(total)
-        which = np.repeat(t_of_block, counts)
-        c_rec = self.c[rows]
-        th_rec = self.theta[rows]
-        ok = (np.abs(c_rec - sides[which, 2]) <= eps) & (np.abs(th_rec - theta[which]) <= tol[which])
-        rows, which, c_rec, th_rec = rows[ok], which[ok], c_rec[ok], th_rec[ok]
-        # finally all three sides (the paper's check): the longest from b, c and theta_max
-        key = self.key[rows]
-        b_rec = (key - np.floor(key)) * self.b_scale
-        a_rec = np.sqrt(b_rec * b_rec + c_rec * c_rec - 2 * b_rec * c_rec * np.cos(th_rec))
-        ok = np.abs(a_rec - sides[which, 0]) <= eps
-        return rows[ok], which[ok]
+        ``which`` the index of the observed triangle of each row (ascending).
+
+        With ``labels`` and ``obs_vec`` given, mirror images (opposite handedness) are dropped;
+        with ``max_per_triangle > 0``, so is every candidate of a triangle matching more than
+        that many catalogue triangles (it carries no information)."""
+        check_hand = labels is not None and obs_vec is not None
+        if not check_hand:
+            labels = np.zeros((len(theta), 3), np.int64)
+            obs_vec = np.zeros((1, 3))
+        return _query(self.key, self.c, self.theta, self.ids, self.vec,
+                      np.ascontiguousarray(obs_vec, dtype=np.float64),
+                      np.ascontiguousarray(labels, dtype=np.int64),
+                      np.ascontiguousarray(sides, dtype=np.float64),
+                      np.ascontiguousarray(theta, dtype=np.float64),
+                      np.ascontiguousarray(tol, dtype=np.float64),
+                      float(eps), self.n_blocks, self.b_scale, check_hand, int(max_per_triangle))
 
     def identify(self, ctx: SolveContext) -> Verified | None:
         obs = ctx.obs
@@ -218,17 +190,11 @@ class MaxAngleMatcher:
                 break
             sl = slice(lo, lo + size)
             lo += size
-            rows, which = self.query_many(sides[sl], theta[sl], tol[sl], eps)
+            rows, which = self.query_many(sides[sl], theta[sl], tol[sl], eps, labels[sl], v, MAX_CANDIDATES)
             if len(rows) == 0:
                 ctx.verifier.patterns += size
                 continue
-            lab = labels[sl][which]
-            cand = self.ids[rows].astype(np.int64)
-            keep = same_handedness_many(self.vec, v, lab, cand)
-            # a triangle matching too many catalogue triangles is uninformative: drop it
-            per_tri = np.bincount(which[keep], minlength=size)
-            keep &= per_tri[which] <= MAX_CANDIDATES
-            found = ctx.verifier.screen_and_check_many(lab[keep], cand[keep], n_patterns=size)
+            found = ctx.verifier.screen_and_check_many(labels[sl][which], self.ids[rows], n_patterns=size)
             if found is not None:
                 return found
         return None
@@ -253,3 +219,115 @@ def _chunks(total: int) -> list[int]:
         done += sizes[-1]
         size = min(2 * size, 16)  # bounded, so the time limit is checked often
     return sizes
+
+
+@njit(cache=True, nogil=True)
+def _query(key: np.ndarray, c_tab: np.ndarray, th_tab: np.ndarray, ids: np.ndarray, star_vec: np.ndarray,
+           obs_vec: np.ndarray, labels: np.ndarray, sides: np.ndarray, theta: np.ndarray, tol: np.ndarray,
+           eps: float, n_blocks: int, b_scale: float, check_hand: bool,
+           max_per_triangle: int) -> tuple[np.ndarray, np.ndarray]:
+    """Compiled query: the blocks covering ``theta +- tol``, the ``b +- eps`` slice of each
+    (binary search on the composite key), then ``c``, ``theta`` and the longest side ``a``
+    (from ``b``, ``c``, ``theta``) within tolerance, then handedness."""
+    cap = 256
+    rows = np.empty(cap, np.int64)
+    which = np.empty(cap, np.int64)
+    n_out = 0
+    for t in range(len(theta)):
+        first = n_out
+        a_obs, b_obs, c_obs = sides[t, 0], sides[t, 1], sides[t, 2]
+        th, tl = theta[t], tol[t]
+        h_obs = 0.0
+        if check_hand:
+            h_obs = _triple(obs_vec[labels[t, 0]], obs_vec[labels[t, 1]], obs_vec[labels[t, 2]])
+        blk_lo = min(max(int(n_blocks * (th - tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
+        blk_hi = min(max(int(n_blocks * (th + tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
+        for blk in range(blk_lo, blk_hi + 1):
+            start = np.searchsorted(key, blk + (b_obs - eps) / b_scale, side="left")
+            end = np.searchsorted(key, blk + (b_obs + eps) / b_scale, side="right")
+            for r in range(start, end):
+                if abs(c_tab[r] - c_obs) > eps or abs(th_tab[r] - th) > tl:
+                    continue
+                b_rec = (key[r] - math.floor(key[r])) * b_scale
+                c_rec = float(c_tab[r])
+                a_rec = math.sqrt(max(b_rec * b_rec + c_rec * c_rec - 2 * b_rec * c_rec * math.cos(th_tab[r]), 0.0))
+                if abs(a_rec - a_obs) > eps:
+                    continue
+                if check_hand:
+                    h_cat = _triple(star_vec[ids[r, 0]], star_vec[ids[r, 1]], star_vec[ids[r, 2]])
+                    if (h_cat > 0) != (h_obs > 0):
+                        continue
+                if n_out == cap:
+                    cap *= 2
+                    rows2 = np.empty(cap, np.int64)
+                    which2 = np.empty(cap, np.int64)
+                    rows2[:n_out] = rows[:n_out]
+                    which2[:n_out] = which[:n_out]
+                    rows, which = rows2, which2
+                rows[n_out] = r
+                which[n_out] = t
+                n_out += 1
+        if max_per_triangle > 0 and n_out - first > max_per_triangle:
+            n_out = first
+    return rows[:n_out].copy(), which[:n_out].copy()
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _triple(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    """``a . (b x c)``: its sign is a triangle's handedness."""
+    return (a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2])
+            + a[2] * (b[0] * c[1] - b[1] * c[0]))
+
+
+@njit(cache=True, nogil=True)
+def _observed_triangles(d: np.ndarray, tri: np.ndarray, eps: float, d_max: float,
+                        xi: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Compiled body of :meth:`MaxAngleMatcher.observed_triangles`, before the sort by
+    tolerance: usable triangles in pattern order, each followed by its near-tie relabellings
+    (``a ~ b``: max/sec swapped; ``b ~ c``: sec/thi swapped; both: rotated)."""
+    cap = 4 * len(tri)
+    labels = np.empty((cap, 3), np.int64)
+    sides = np.empty((cap, 3))
+    theta = np.empty(cap)
+    tol = np.empty(cap)
+    n_out = 0
+    s = np.empty(3)
+    ids = np.empty(3, np.int64)
+    for t in range(len(tri)):
+        i, j, k = tri[t, 0], tri[t, 1], tri[t, 2]
+        s[0], s[1], s[2] = d[j, k], d[i, k], d[i, j]  # each side opposite its vertex
+        ids[0], ids[1], ids[2] = i, j, k
+        for m in range(1, 3):  # stable insertion sort, descending
+            q = m
+            while q > 0 and s[q] > s[q - 1]:
+                s[q], s[q - 1] = s[q - 1], s[q]
+                ids[q], ids[q - 1] = ids[q - 1], ids[q]
+                q -= 1
+        a, b, c = s[0], s[1], s[2]
+        if not (a <= d_max - eps and c >= xi + eps and c >= 4 * eps):
+            continue
+        th = math.acos(min(max((b * b + c * c - a * a) / (2 * b * c), -1.0), 1.0))
+        if th > THETA_MAX_USABLE:
+            continue
+        sn = max(math.sin(th), 1e-3)
+        cs = math.cos(th)
+        tl = eps * (a + abs(c - b * cs) + abs(b - c * cs)) / (b * c * sn)  # |d theta / d side| summed
+        ab = a - b < 2 * eps
+        bc = b - c < 2 * eps
+        for variant in range(4):
+            if (variant == 1 and not ab) or (variant == 2 and not bc) or (variant == 3 and not (ab and bc)):
+                continue
+            if variant == 0:
+                v0, v1, v2 = ids[0], ids[1], ids[2]
+            elif variant == 1:
+                v0, v1, v2 = ids[1], ids[0], ids[2]
+            elif variant == 2:
+                v0, v1, v2 = ids[0], ids[2], ids[1]
+            else:
+                v0, v1, v2 = ids[1], ids[2], ids[0]
+            labels[n_out, 0], labels[n_out, 1], labels[n_out, 2] = v0, v1, v2
+            sides[n_out, 0], sides[n_out, 1], sides[n_out, 2] = a, b, c
+            theta[n_out] = th
+            tol[n_out] = tl
+            n_out += 1
+    return labels[:n_out], sides[:n_out], theta[:n_out], tol[:n_out]

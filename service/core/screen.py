@@ -1,0 +1,187 @@
+"""The verifier's screen as a compiled kernel: cheap evidence for many hypotheses at once.
+
+A hypothesis pairs an observed star triangle with a catalogue triple. Its attitude is the
+rotation between the two triangles' frames (first axis the mean direction, second towards the
+first vertex: errors averaged over the three stars). Under it, the brightest other observed
+stars are mapped into ICRS; each that lands within ``chord`` of a catalogue star is a *hit*.
+Hypotheses are then fully verified best-first by :class:`~service.core.verify.Verifier`.
+A mirror-image match (opposite handedness) can never be right and scores -1.
+
+One loop per hypothesis in numba: no (K, m, 3) temporaries and no k-d tree round trips, so
+screening hundreds of hypotheses costs microseconds.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .skygrid import SkyGrid, has_star_within
+from .types import FloatArray, IntArray
+
+
+def screen_hits(obs_vec: FloatArray, obs_tris: IntArray, cands: IntArray, others: IntArray,
+                grid: SkyGrid, chord: float) -> IntArray:
+    """Hits per hypothesis ``k``: rows ``others`` (not in ``obs_tris[k]``) whose ICRS direction
+    under the attitude of ``obs_tris[k] -> cands[k]`` lies within ``chord`` (unit-vector
+    distance, ~radians) of a catalogue star other than the triple's own; -1 for a mirror image.
+
+    Parameters
+    ----------
+    obs_vec : (N, 3) float64
+        Observed unit vectors (body frame).
+    obs_tris, cands : (K, 3) int
+        Observed rows and the catalogue rows (of ``grid.vec``) they are hypothesised to be.
+    others : (M,) int
+        Observed rows to predict.
+    """
+    return _screen(np.ascontiguousarray(obs_vec, dtype=np.float64),
+                   np.ascontiguousarray(obs_tris, dtype=np.int64).reshape(-1, 3),
+                   np.ascontiguousarray(cands, dtype=np.int64).reshape(-1, 3),
+                   np.ascontiguousarray(others, dtype=np.int64), float(chord),
+                   grid.cell, grid.n_side, grid.keys, grid.starts, grid.stars, grid.vec)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _frame(a: np.ndarray, b: np.ndarray, c: np.ndarray, out: np.ndarray) -> float:
+    """Columns of ``out`` (3, 3): the triangle frame of ``a, b, c``; returns the triple
+    product ``a . (b x c)`` (its sign is the handedness)."""
+    t1x, t1y, t1z = a[0] + b[0] + c[0], a[1] + b[1] + c[1], a[2] + b[2] + c[2]
+    n = math.sqrt(t1x * t1x + t1y * t1y + t1z * t1z)
+    t1x, t1y, t1z = t1x / n, t1y / n, t1z / n
+    t2x = t1y * a[2] - t1z * a[1]
+    t2y = t1z * a[0] - t1x * a[2]
+    t2z = t1x * a[1] - t1y * a[0]
+    n = math.sqrt(t2x * t2x + t2y * t2y + t2z * t2z)
+    if n == 0.0:
+        n = 1e-300
+    t2x, t2y, t2z = t2x / n, t2y / n, t2z / n
+    out[0, 0], out[1, 0], out[2, 0] = t1x, t1y, t1z
+    out[0, 1], out[1, 1], out[2, 1] = t2x, t2y, t2z
+    out[0, 2] = t1y * t2z - t1z * t2y
+    out[1, 2] = t1z * t2x - t1x * t2z
+    out[2, 2] = t1x * t2y - t1y * t2x
+    bxc0 = b[1] * c[2] - b[2] * c[1]
+    bxc1 = b[2] * c[0] - b[0] * c[2]
+    bxc2 = b[0] * c[1] - b[1] * c[0]
+    return a[0] * bxc0 + a[1] * bxc1 + a[2] * bxc2
+
+
+@njit(cache=True, nogil=True)
+def _screen(obs_vec: np.ndarray, obs_tris: np.ndarray, cands: np.ndarray, others: np.ndarray,
+            chord: float, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray,
+            stars: np.ndarray, star_vec: np.ndarray) -> np.ndarray:
+    k_total = len(cands)
+    hits = np.zeros(k_total, dtype=np.int64)
+    fo = np.empty((3, 3))
+    fc = np.empty((3, 3))
+    for k in range(k_total):
+        o0, o1, o2 = obs_tris[k, 0], obs_tris[k, 1], obs_tris[k, 2]
+        c0, c1, c2 = cands[k, 0], cands[k, 1], cands[k, 2]
+        h_obs = _frame(obs_vec[o0], obs_vec[o1], obs_vec[o2], fo)
+        h_cat = _frame(star_vec[c0], star_vec[c1], star_vec[c2], fc)
+        if (h_obs > 0) != (h_cat > 0):
+            hits[k] = -1
+            continue
+        # v_icrs = C O^T v_obs
+        count = 0
+        for m in range(len(others)):
+            row = others[m]
+            if row == o0 or row == o1 or row == o2:
+                continue
+            v = obs_vec[row]
+            l0 = fo[0, 0] * v[0] + fo[1, 0] * v[1] + fo[2, 0] * v[2]
+            l1 = fo[0, 1] * v[0] + fo[1, 1] * v[1] + fo[2, 1] * v[2]
+            l2 = fo[0, 2] * v[0] + fo[1, 2] * v[1] + fo[2, 2] * v[2]
+            px = fc[0, 0] * l0 + fc[0, 1] * l1 + fc[0, 2] * l2
+            py = fc[1, 0] * l0 + fc[1, 1] * l1 + fc[1, 2] * l2
+            pz = fc[2, 0] * l0 + fc[2, 1] * l1 + fc[2, 2] * l2
+            if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, c0, c1, c2):
+                count += 1
+        hits[k] = count
+    return hits
+
+
+def project_and_pair(cam_vec: FloatArray, camera_params: tuple[float, float, float, int, int, np.ndarray],
+                     obs_xy: FloatArray, radius_px: float) -> tuple[IntArray, IntArray, int]:
+    """Project camera-frame catalogue vectors ``cam_vec`` ``(P, 3)`` into one camera and pair
+    them with its observed stars ``obs_xy`` ``(R, 2)`` (px).
+
+    A pair is kept only when unambiguous: within ``radius_px``, and no other candidate on
+    either side within twice that (a false star beside a real one, a catalogue double, or a
+    noisy star nearer its neighbour's prediction than its own proves nothing).
+
+    ``camera_params`` is ``(f_px, cx, cy, width, height, distortion[5])`` (see
+    :func:`camera_kernel_params`). Returns ``(obs_rows, pred_rows, n_inside)``: indices into
+    ``obs_xy`` and ``cam_vec`` of the pairs, and how many predictions fell inside the image.
+    """
+    f, cx, cy, w, h, dist = camera_params
+    return _project_and_pair(np.ascontiguousarray(cam_vec, dtype=np.float64), f, cx, cy, w, h, dist,
+                             np.ascontiguousarray(obs_xy, dtype=np.float64), float(radius_px))
+
+
+def camera_kernel_params(camera) -> tuple[float, float, float, int, int, np.ndarray]:  # noqa: ANN001
+    """A camera as plain numbers for the kernels: ``(f_px, cx, cy, width, height,
+    distortion)`` with the Brown-Conrady coefficients (k1, k2, p1, p2, k3) zero-padded."""
+    dist = np.zeros(5)
+    if camera.distortion:
+        dist[:len(camera.distortion)] = camera.distortion[:5]
+    return float(camera.f_px), float(camera.cx), float(camera.cy), int(camera.width), int(camera.height), dist
+
+
+@njit(cache=True, nogil=True)
+def _project_and_pair(cam_vec: np.ndarray, f: float, cx: float, cy: float, w: int, h: int, dist: np.ndarray,
+                      obs_xy: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, int]:
+    n_pred = len(cam_vec)
+    pxy = np.empty((n_pred, 2))
+    keep = np.empty(n_pred, np.int64)
+    n_in = 0
+    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
+    for j in range(n_pred):
+        z = cam_vec[j, 2]
+        if z <= 1e-9:
+            continue
+        xn = cam_vec[j, 0] / z
+        yn = cam_vec[j, 1] / z
+        r2 = xn * xn + yn * yn
+        radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
+        xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
+        yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
+        x = f * xd + cx
+        y = f * yd + cy
+        if x < -0.5 or x > w - 0.5 or y < -0.5 or y > h - 0.5:
+            continue
+        pxy[n_in, 0] = x
+        pxy[n_in, 1] = y
+        keep[n_in] = j
+        n_in += 1
+    n_obs = len(obs_xy)
+    rad2 = radius * radius
+    crowd2 = 4.0 * rad2
+    row_cnt = np.zeros(n_obs, np.int64)
+    col_cnt = np.zeros(n_in, np.int64)
+    row_last = np.full(n_obs, -1, np.int64)
+    for i in range(n_obs):
+        for j in range(n_in):
+            dx = obs_xy[i, 0] - pxy[j, 0]
+            dy = obs_xy[i, 1] - pxy[j, 1]
+            if dx * dx + dy * dy <= crowd2:
+                row_cnt[i] += 1
+                col_cnt[j] += 1
+                row_last[i] = j
+    out_obs = np.empty(n_obs, np.int64)
+    out_pred = np.empty(n_obs, np.int64)
+    n_out = 0
+    for i in range(n_obs):
+        j = row_last[i]
+        if row_cnt[i] != 1 or col_cnt[j] != 1:
+            continue
+        dx = obs_xy[i, 0] - pxy[j, 0]
+        dy = obs_xy[i, 1] - pxy[j, 1]
+        if dx * dx + dy * dy <= rad2:
+            out_obs[n_out] = i
+            out_pred[n_out] = keep[j]
+            n_out += 1
+    return out_obs[:n_out].copy(), out_pred[:n_out].copy(), n_in

@@ -114,14 +114,23 @@ class Verifier:
         return self._first_marginal_at is not None and self.patterns - self._first_marginal_at >= self.confirm_patterns
 
     def best_marginal(self) -> Verified | None:
-        """The most probable marginal answer, or None if there is none or they disagree."""
+        """The most probable marginal answer, or None if there is none or they disagree.
+
+        Two answers agree when they never pair one observed star with two catalogue stars (or
+        one catalogue star with two observed stars) and no point of any image moves by more
+        than three match radii between their attitudes. (A rotation angle alone would call
+        two right answers apart: roll is the least constrained axis, and a roll of a few
+        arcminutes moves the image edge by about a pixel.)"""
         if not self.marginal:
             return None
         best = min(self.marginal, key=lambda v: v.false_prob)
         limit = 3 * self.match_radius_px * self.obs.pixel_scale_rad
+        probe = _image_probes(self.obs)
         for v in self.marginal:
-            cos_angle = (np.trace(v.matrix @ best.matrix.T) - 1) / 2
-            if math.acos(max(-1.0, min(1.0, cos_angle))) > limit:
+            if not _consistent_pairs(v, best):
+                return None
+            moved = np.linalg.norm(probe @ v.matrix - probe @ best.matrix, axis=1)  # R^T p, as rows
+            if np.any(moved > limit):
                 return None
         return best
 
@@ -241,6 +250,26 @@ class Verifier:
         if not all_obs:
             return np.zeros(0, np.int64), np.zeros(0, np.int64), 1.0
         return np.concatenate(all_obs), np.concatenate(all_cat), covered / max(area, 1.0)
+
+
+def _consistent_pairs(a: Verified, b: Verified) -> bool:
+    """True if ``a`` and ``b`` pair no observed star with two catalogue stars and no catalogue
+    star with two observed stars."""
+    for x_a, y_a, x_b, y_b in ((a.obs, a.cat, b.obs, b.cat), (a.cat, a.obs, b.cat, b.obs)):
+        common, ia, ib = np.intersect1d(x_a, x_b, return_indices=True)
+        if len(common) and np.any(y_a[ia] != y_b[ib]):
+            return False
+    return True
+
+
+def _image_probes(obs: Observation) -> FloatArray:
+    """Body-frame unit vectors ``(5 * n_cameras, 3)`` of each image's centre and corners."""
+    rows = []
+    for cam, mount in zip(obs.cameras, obs.mountings, strict=True):
+        w, h = cam.width - 0.5, cam.height - 0.5
+        xy = np.array([[cam.cx, cam.cy], [-0.5, -0.5], [w, -0.5], [-0.5, h], [w, h]])
+        rows.append(cam.pixel_to_vector(xy) @ mount)  # camera -> body: R_mount^T v
+    return np.concatenate(rows)
 
 
 def residuals_arcsec(obs: Observation, db: NavDatabase, v: Verified) -> FloatArray:

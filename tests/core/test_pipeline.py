@@ -24,10 +24,11 @@ def frames_1px_2false():
 def test_identifies_99_percent_with_no_wrong_answer(method: str, seed000_db, frames_1px_2false) -> None:
     """Seed 000's experiment: 1 px centroid noise, 2 false stars, 500 frames.
 
-    About 1.2% of these frames hold 4 or fewer real stars. At this noise a 4-star frame cannot
-    be told from a coincidence at the verifier's 1e-5 bound (the 4th star lands near some
-    catalogue star for ~1e-2 of random triangles), so the 99% bar is asserted on frames with
-    at least 5 real stars, and 98% on all frames; wrong answers must be zero everywhere.
+    1.6% of these frames hold 5 or fewer real stars (0.9% of another seed's 1,000); at this
+    noise such a frame cannot be told from a coincidence at the verifier's 1e-5 bound (two
+    extra stars each land near some predicted star for ~5e-4 of random points, times the
+    hypotheses tried). So every frame with >= 6 real stars must be solved (but one in 500)
+    and 98% of all frames; wrong answers must be zero everywhere.
     """
     solved = wrong = rich = rich_solved = 0
     for f in frames_1px_2false:
@@ -36,13 +37,13 @@ def test_identifies_99_percent_with_no_wrong_answer(method: str, seed000_db, fra
         solved += s.solved
         wrong += s.solved and not s.correct
         n_real = int((f.hip >= 0).sum())
-        rich += n_real >= 5
-        rich_solved += n_real >= 5 and s.solved
+        rich += n_real >= 6
+        rich_solved += n_real >= 6 and s.solved
         if s.solved:
             assert sol.method == method
             assert s.cross_boresight_arcsec < 150  # 1 px = 30 arcsec
     assert wrong == 0
-    assert rich_solved >= 0.99 * rich
+    assert rich_solved >= 0.998 * rich
     assert solved >= 0.98 * len(frames_1px_2false)
 
 

@@ -2,13 +2,18 @@
 
     python -m bench.bench_centroid --out bench/out            # full run, ~1 min
     python -m bench.bench_centroid --out bench/out --quick    # fewer repeats and fields
+    python -m bench.bench_centroid --against HEAD~3           # detection time, that commit vs now
 
 Writes ``centroid.md`` (markdown tables), ``centroid.json`` and ``centroid_rms_vs_snr.png``
 into ``--out``:
 
 - **timing**: :func:`service.core.centroid.extract` on rendered 16-bit frames, 1024x1024 with
   300 stars and 4096x4096 with 3000 (PSF sigma 1 px, background 100, read noise 5, 50 hot
-  pixels), median and p95 over repeats, wall clock on this machine, default OpenCV threads.
+  pixels), median and p95 over repeats, wall clock on this machine, default OpenCV threads,
+  and the least CPU time (``process_time``, all threads) of the repeats.
+- **against** (``--against REV``, instead of everything else): the same frames timed with
+  ``service/core/centroid`` as committed at git ``REV`` and as it is now, alternately in one
+  process, so that the machine's load hits both alike; least wall and CPU time of the repeats.
 - **accuracy**: random fields, SNR log-uniform in [3, 300] (``render.star_snr``: the SNR of an
   ideal PSF fit), stars >= 5 px apart (7 px for the 1.6 px PSF); per SNR bin the completeness
   (a detection within 1 px) and the 2-D RMS error of the matched stars, next to the
@@ -23,10 +28,16 @@ into ``--out``:
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import platform
+import re
+import subprocess
+import sys
+import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -46,23 +57,81 @@ def _flux_for_snr(snr: np.ndarray, sigma: float) -> np.ndarray:
     return np.interp(snr, star_snr(grid, psf_sigma_px=sigma, background=100.0, read_noise=5.0), grid)
 
 
-def bench_timing(repeats: int) -> list[dict[str, Any]]:
-    rows = []
-    for size, n_stars, reps in ((1024, 300, repeats), (4096, 3000, max(5, repeats // 2))):
+def _timing_frames() -> list[tuple[int, int, np.ndarray]]:
+    """(size, stars, 16-bit frame) for the timing runs."""
+    frames = []
+    for size, n_stars in ((1024, 300), (4096, 3000)):
         rng = np.random.default_rng(size)
         xy = random_positions(n_stars, width=size, height=size, rng=rng)
         flux = _flux_for_snr(10 ** rng.uniform(np.log10(3), np.log10(300), n_stars), 1.0)
         img = render_image(xy, flux, width=size, height=size, hot_pixels=50, rng=rng)
+        frames.append((size, n_stars, img))
+    return frames
+
+
+def _timed(fn: Callable[..., Any], *args: Any) -> tuple[float, float, Any]:
+    """Wall and CPU seconds of one call ``fn(*args)``, and its result."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    out = fn(*args)
+    return time.perf_counter() - t0, time.process_time() - c0, out
+
+
+def bench_timing(repeats: int) -> list[dict[str, Any]]:
+    rows = []
+    for size, n_stars, img in _timing_frames():
+        reps = repeats if size <= 1024 else max(5, repeats // 2)
         extract(img)  # warm-up
-        times = []
+        runs = [_timed(extract, img) for _ in range(reps)]
+        ms = np.array([r[0] for r in runs]) * 1e3
+        rows.append({"size": f"{size}x{size}", "stars": n_stars, "repeats": reps,
+                     "detected": len(runs[-1][2]), "median_ms": float(np.median(ms)),
+                     "p95_ms": float(np.percentile(ms, 95)), "min_ms": float(ms.min()),
+                     "cpu_min_ms": min(r[1] for r in runs) * 1e3})
+    return rows
+
+
+def extract_at(rev: str) -> Callable[..., Any]:
+    """``extract`` of ``service/core/centroid`` as committed at git ``rev``, imported from a
+    temporary copy (its ``..`` imports pointed at today's ``service.core``)."""
+    root = Path(__file__).resolve().parents[1]
+    git = ["git", "-C", str(root)]
+    names = subprocess.run([*git, "ls-tree", "--name-only", rev, "service/core/centroid/"], check=True,
+                           capture_output=True, text=True).stdout.split()
+    pkg = Path(tempfile.mkdtemp(prefix="centroid_at_")) / "centroid_at_rev"
+    pkg.mkdir()
+    for name in names:
+        if name.endswith(".py"):
+            text = subprocess.run([*git, "show", f"{rev}:{name}"], check=True, capture_output=True,
+                                  text=True).stdout
+            (pkg / Path(name).name).write_text(re.sub(r"from \.\.(\w)", r"from service.core.\1", text))
+    spec = importlib.util.spec_from_file_location(pkg.name, pkg / "__init__.py",
+                                                  submodule_search_locations=[str(pkg)])
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[pkg.name] = module
+    spec.loader.exec_module(module)
+    return module.extract  # type: ignore[no-any-return]
+
+
+def bench_against(rev: str, repeats: int) -> list[dict[str, Any]]:
+    """Least wall and CPU time of ``extract`` at ``rev`` and now, called alternately."""
+    old = extract_at(rev)
+    rows = []
+    for size, n_stars, img in _timing_frames():
+        reps = repeats if size <= 1024 else max(5, repeats // 2)
+        old(img), extract(img)  # warm-up
+        runs: dict[str, list[tuple[float, float, Any]]] = {"old": [], "new": []}
         for _ in range(reps):
-            t0 = time.perf_counter()
-            det = extract(img)
-            times.append(time.perf_counter() - t0)
-        ms = np.array(times) * 1e3
-        rows.append({"size": f"{size}x{size}", "stars": n_stars, "repeats": reps, "detected": len(det),
-                     "median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
-                     "min_ms": float(ms.min())})
+            runs["old"].append(_timed(old, img))
+            runs["new"].append(_timed(extract, img))
+        best = {k: (min(r[0] for r in v) * 1e3, min(r[1] for r in v) * 1e3) for k, v in runs.items()}
+        rows.append({"size": f"{size}x{size}", "stars": n_stars, "repeats": reps,
+                     "old_wall_ms": best["old"][0], "new_wall_ms": best["new"][0],
+                     "wall_ratio": best["old"][0] / best["new"][0],
+                     "old_cpu_ms": best["old"][1], "new_cpu_ms": best["new"][1],
+                     "cpu_ratio": best["old"][1] / best["new"][1],
+                     "same_detections": bool(np.array_equal(runs["old"][-1][2].centroids.xy,
+                                                            runs["new"][-1][2].centroids.xy))})
     return rows
 
 
@@ -197,9 +266,22 @@ def main(argv: list[str] | None = None) -> None:
     default_real = os.environ.get("SKYFIX_REAL_DATA") or str(
         Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real")
     ap.add_argument("--real", type=Path, default=Path(default_real), help="dir holding matches.json")
+    ap.add_argument("--against", metavar="REV", help="only time detection at git REV against now")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     q = args.quick
+    if args.against:
+        rows = bench_against(args.against, 10 if q else 30)
+        md_against = "\n".join([
+            f"# Detection time, {args.against} vs now", "",
+            f"`python -m bench.bench_centroid --against {args.against}{' --quick' if q else ''}` — "
+            f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at the start; least of the "
+            "repeats, old and new called alternately.", "",
+            _table(rows, ["size", "stars", "repeats", "old_wall_ms", "new_wall_ms", "wall_ratio",
+                          "old_cpu_ms", "new_cpu_ms", "cpu_ratio", "same_detections"]), ""])
+        (args.out / "centroid_against.md").write_text(md_against)
+        print(md_against)  # noqa: T201
+        return
     result: dict[str, Any] = {
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "numpy": np.__version__,
                     "opencv": cv2.__version__, "opencv_threads": cv2.getNumThreads(),
@@ -216,7 +298,8 @@ def main(argv: list[str] | None = None) -> None:
           f"{result['machine']['numpy']}, OpenCV {result['machine']['opencv']}, load average "
           f"{result['machine']['load_avg_1min']:.2f} at the start.", "",
           "## Detection time (extract, 16-bit)", "",
-          _table(result["timing"], ["size", "stars", "detected", "repeats", "median_ms", "p95_ms", "min_ms"]),
+          _table(result["timing"], ["size", "stars", "detected", "repeats", "median_ms", "p95_ms", "min_ms",
+                                    "cpu_min_ms"]),
           ""]
     for key, acc in result["accuracy"].items():
         md += [f"## Accuracy vs SNR, {key} px", "",

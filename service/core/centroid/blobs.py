@@ -77,8 +77,8 @@ class Sources:
 
 
 def find_sources(
-    pts: NDArray[Any],
-    labels: NDArray[Any],
+    lin: IntArray,
+    labels: IntArray,
     image: NDArray[Any],
     det: NDArray[Any],
     raw_grid: TileGrid,
@@ -89,21 +89,24 @@ def find_sources(
     prominence: float = 3.0,
     contrast: float = 0.005,
 ) -> Sources:
-    """Sources of the blobs whose mask pixels are ``pts`` ((M, 2) int32 (x, y)).
+    """Sources of the blobs whose mask pixels are ``lin`` (ascending linear indices of the
+    C-contiguous ``image`` and ``det``) with component ``labels`` (:mod:`.sparse`).
 
-    ``labels`` is the component image, ``det`` the filtered image that was thresholded;
-    ``det_sigma`` its noise grid on ``det_grid``'s tiles.
+    ``det`` is the filtered image that was thresholded; ``det_sigma`` its noise grid on
+    ``det_grid``'s tiles.
     """
-    xs, ys = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
-    lab = labels[ys, xs]
-    order = np.argsort(lab, kind="stable")
-    xs, ys, lab = xs[order], ys[order], lab[order]
+    # Group the pixels by blob, raster order kept within each (a radix sort for 16-bit labels).
+    keys = labels.astype(np.uint16) if labels.size and labels.max() < 65536 else labels
+    order = np.argsort(keys, kind="stable")
+    lin, lab = lin[order], keys[order]
+    ys = lin // det.shape[1]
+    xs = lin - ys * det.shape[1]
     starts = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]])
     ends = np.r_[starts[1:], lab.size]
     area = ends - starts
     blob_of = np.repeat(np.arange(starts.size), area)
-    det_v = det[ys, xs].astype(np.float64)
-    raw_v = image[ys, xs].astype(np.float64)
+    det_v = det.reshape(-1)[lin].astype(np.float64)
+    raw_v = image.reshape(-1)[lin].astype(np.float64)
 
     # Highest filtered pixel per blob (the first one in raster order on a plateau).
     at_max = np.flatnonzero(det_v == np.maximum.reduceat(det_v, starts)[blob_of])
@@ -121,7 +124,7 @@ def find_sources(
                         np.maximum.reduceat(ys, starts) - np.minimum.reduceat(ys, starts)) + 1
 
     # Secondary peaks: other local maxima of multi-pixel blobs, prominent over the ridge.
-    is_max = _local_maxima(det, xs, ys, det_v, area[blob_of] >= 2)
+    is_max = _local_maxima(det, lin, xs, ys, det_v, area[blob_of] >= 2)
     is_max[peak_i] = False
     if saturation is not None:
         n_sat = np.add.reduceat((raw_v >= saturation).astype(np.int64), starts)
@@ -153,18 +156,19 @@ def find_sources(
     )
 
 
-def _local_maxima(det: NDArray[Any], xs: IntArray, ys: IntArray, centre: FloatArray,
+def _local_maxima(det: NDArray[Any], lin: IntArray, xs: IntArray, ys: IntArray, centre: FloatArray,
                   consider: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """Which of the pixels (xs, ys) are 8-neighbour maxima of ``det`` (raster tie-break);
-    only pixels flagged in ``consider`` are tested, the others come back False."""
+    """Which of the pixels ``lin`` (at xs, ys) are 8-neighbour maxima of ``det`` (raster
+    tie-break); only pixels flagged in ``consider`` are tested, the others come back False."""
     height, width = det.shape
+    flat = det.reshape(-1)
     out = consider.copy()
     for offsets, strict in ((_AFTER, True), (_BEFORE, False)):
         for dy, dx in offsets:
             idx = np.flatnonzero(out)  # shrinks quickly: most pixels fail the first tests
             ny, nx = ys[idx] + dy, xs[idx] + dx
             inside = (ny >= 0) & (ny < height) & (nx >= 0) & (nx < width)
-            nb = det[np.clip(ny, 0, height - 1), np.clip(nx, 0, width - 1)].astype(np.float64)
+            nb = flat[np.where(inside, lin[idx] + (dy * width + dx), lin[idx])].astype(np.float64)
             ok = centre[idx] > nb if strict else centre[idx] >= nb
             out[idx[~(ok | ~inside)]] = False
     return out

@@ -9,8 +9,9 @@ The chain (after the seed paper's "filtering, threshold segmentation, connected 
    (:mod:`.background`).
 3. **Threshold** the filtered image at ``background + sigma_threshold * sigma`` (both of the
    filtered image, so correlated noise is accounted for).
-4. **Connected components** (OpenCV, 8-connected); per-blob area, extent, peak and centre of
-   light are reduced over the (sparse) mask pixels, never the full frame. Blobs holding several
+4. **Connected components** (8-connected) of the sparse mask pixels (:mod:`.sparse`); per-blob
+   area, extent, peak and centre of light are reduced over the mask pixels, never the full
+   frame. Blobs holding several
    prominent maxima of the filtered image are **deblended** into one source per maximum
    (:mod:`.blobs`).
 5. Reject sources of implausible blob area and **hot pixels**: a spike whose 8 neighbours hold
@@ -40,6 +41,7 @@ from ..types import Centroids
 from .background import tile_statistics
 from .blobs import find_sources
 from .measure import gather_stamps, psf_sigma_from_stamps, sharpness, windowed_centroid
+from .sparse import label_pixels, threshold_pixels
 from .stellar import significance_deficit
 
 __all__ = ["Detections", "extract"]
@@ -172,24 +174,15 @@ def extract(
     det_floor = raw_floor * det_norm if det.dtype.kind == "f" else 0.5
     det_sigma = np.maximum(det_grid.sigma, det_floor)
     thr_grid = det_grid.level + np.float32(sigma_threshold) * det_sigma
-    if det.dtype.kind != "f":
-        # Integer detection image: raw counts d > t <=> d > floor(t); a filtered image rounded
-        # to whole counts, round(v) > floor(t + 1/2) <=> v >= floor(t + 1/2) + 1/2 >= t.
-        info = np.iinfo(det.dtype)
-        shift = 0.5 if det is not img else 0.0
-        thr_grid = np.clip(np.floor(thr_grid + shift), info.min, info.max).astype(det.dtype)
-    mask = cv2.compare(det, det_grid.upsample(thr_grid, (height, width)), cv2.CMP_GT)
-
-    # 16-bit labels are faster; OpenCV raises when more than 65535 blobs need 32-bit ones.
-    try:
-        n_labels, labels = cv2.connectedComponents(mask, connectivity=8, ltype=cv2.CV_16U)
-    except cv2.error:
-        n_labels, labels = cv2.connectedComponents(mask, connectivity=8, ltype=cv2.CV_32S)
-    if n_labels <= 1:
+    # Integer detection image: raw counts d > t <=> d > floor(t); a filtered image rounded to
+    # whole counts, round(v) > floor(t + 1/2) <=> v >= floor(t + 1/2) + 1/2 >= t.
+    shift = None if det.dtype.kind == "f" else (0.5 if det is not img else 0.0)
+    lin = threshold_pixels(det, det_grid, thr_grid, shift=shift)
+    n_labels, labels = label_pixels(lin, width)
+    if n_labels == 0:
         return Detections.empty()
     sat_level = _saturation_level(img, saturation)
-    pts = cv2.findNonZero(mask).reshape(-1, 2)
-    src = find_sources(pts, labels, img, det, raw_grid, det_grid, det_sigma, saturation=sat_level)
+    src = find_sources(lin, labels, img, det, raw_grid, det_grid, det_sigma, saturation=sat_level)
     cand = np.flatnonzero((src.area >= min_area_px) & (src.area <= max_area_px))
     if max_stars is not None:  # measure only the most significant candidates
         cand = cand[np.argsort(-src.height[cand], kind="stable")[: max(1000, 5 * max_stars)]]

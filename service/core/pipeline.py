@@ -103,10 +103,11 @@ def solve_rig(
     rotating body vectors into that camera (None = identity). The answer's quaternion rotates
     ICRS into the body frame.
     """
-    t0 = time.perf_counter()
-    timings: dict[str, float] = {}
     if not frames:
         raise InvalidInputError("cameras", "at least one camera frame is required")
+    _ensure_warm(db)  # one-off per opened database; not charged to this frame's time limit
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
     if isinstance(db, NavDatabaseSet):
         widest = max((cam for _, cam, _ in frames), key=lambda c: c.diagonal_fov_deg)
         fitting = db.for_camera(widest.fov_deg, widest.diagonal_fov_deg)
@@ -318,6 +319,14 @@ def tan_wcs(r: np.ndarray, camera: Camera) -> dict[str, Any]:
     }
 
 
+def _ensure_warm(db: NavDatabase | NavDatabaseSet) -> None:
+    """:func:`warm_up` ``db`` once (the first solve on a freshly opened database would
+    otherwise spend its time limit loading compiled kernels and building indexes)."""
+    if not db.__dict__.get("_warm"):
+        db.__dict__["_warm"] = True
+        warm_up(db)
+
+
 def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
     """Build every matcher, the star k-d tree and sky grid of ``db`` (or of each member of a
     set), and solve one frame of its own stars with each method, so that numba's kernels are
@@ -325,8 +334,10 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
     as fast as the rest."""
     from .verify import sky_grid, star_tree
 
+    db.__dict__["_warm"] = True
     members = db.members.values() if isinstance(db, NavDatabaseSet) else [db]
     for member in members:
+        member.__dict__["_warm"] = True
         star_tree(member)
         sky_grid(member)
         camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)

@@ -16,35 +16,44 @@ SEED000_METHODS = ["maxangle", "pyramid"]
 
 @pytest.fixture(scope="module")
 def frames_1px_2false():
-    return simulate_frames(SEED000_CAMERA, 500, SimConfig(mag_limit=6.5, centroid_noise_px=1.0, false_stars=2), rng=0)
+    """Five seeded sets of 500 frames (seeds 0-4, all kept): 1 px noise, 2 false stars."""
+    config = SimConfig(mag_limit=6.5, centroid_noise_px=1.0, false_stars=2)
+    return [simulate_frames(SEED000_CAMERA, 500, config, rng=seed) for seed in range(5)]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("method", SEED000_METHODS)
 def test_identifies_99_percent_with_no_wrong_answer(method: str, seed000_db, frames_1px_2false) -> None:
-    """Seed 000's experiment: 1 px centroid noise, 2 false stars, 500 frames.
+    """Seed 000's experiment: 1 px centroid noise, 2 false stars; >= 99% of frames identified,
+    none wrong.
 
-    1.6% of these frames hold 5 or fewer real stars (0.9% of another seed's 1,000); at this
+    The rate is measured on 2,500 frames (five seeded sets of 500) because one set of 500 is
+    too small a sample for a 1% bar: the sets hold 2-8 frames with <= 5 real stars, and at this
     noise such a frame cannot be told from a coincidence at the verifier's 1e-5 bound (two
     extra stars each land near some predicted star for ~5e-4 of random points, times the
-    hypotheses tried). So every frame with >= 6 real stars must be solved (but one in 500)
-    and 98% of all frames; wrong answers must be zero everywhere.
+    hypotheses tried). Measured: maxangle 99.28%, pyramid 99.32% (the sets: 98.4-99.8%).
+    Every frame with >= 6 real stars must be solved but one in 500, every set >= 98%.
     """
-    solved = wrong = rich = rich_solved = 0
-    for f in frames_1px_2false:
-        sol = solve(f.centroids, SEED000_CAMERA, seed000_db, method=method)
-        s = score(sol, f.quaternion, f.hip.tolist(), blends=f.blends)
-        solved += s.solved
-        wrong += s.solved and not s.correct
-        n_real = int((f.hip >= 0).sum())
-        rich += n_real >= 6
-        rich_solved += n_real >= 6 and s.solved
-        if s.solved:
-            assert sol.method == method
-            assert s.cross_boresight_arcsec < 150  # 1 px = 30 arcsec
+    solved = wrong = rich = rich_solved = total = 0
+    for frames in frames_1px_2false:
+        set_solved = 0
+        for f in frames:
+            sol = solve(f.centroids, SEED000_CAMERA, seed000_db, method=method)
+            s = score(sol, f.quaternion, f.hip.tolist(), blends=f.blends)
+            set_solved += s.solved
+            wrong += s.solved and not s.correct
+            n_real = int((f.hip >= 0).sum())
+            rich += n_real >= 6
+            rich_solved += n_real >= 6 and s.solved
+            if s.solved:
+                assert sol.method == method
+                assert s.cross_boresight_arcsec < 150  # 1 px = 30 arcsec
+        assert set_solved >= 0.98 * len(frames)
+        solved += set_solved
+        total += len(frames)
     assert wrong == 0
     assert rich_solved >= 0.998 * rich
-    assert solved >= 0.98 * len(frames_1px_2false)
+    assert solved >= 0.99 * total
 
 
 @pytest.mark.slow

@@ -63,7 +63,7 @@ def info(db: Annotated[Path | None, typer.Argument(help="Database directory (def
     m = d.manifest
     size = sum((d.path / a["file"]).stat().st_size for a in m["arrays"].values())
     summary = {k: m[k] for k in ("schema_version", "catalogue", "epoch", "mag_limit", "fov_min_deg", "fov_max_deg",
-                                  "n_stars", "built_utc", "build_seconds", "methods")}
+                                  "n_stars", "built_utc", "build_seconds", "methods", "shared")}
     summary.update(path=str(d.path.resolve()), size_bytes=size, open_ms=round(ms, 2))
     typer.echo(json.dumps(summary, indent=1))
 

@@ -34,12 +34,12 @@ def test_db_info_and_verify(small_db: Path) -> None:
     info = json.loads(run("db", "info", str(small_db)).stdout)
     assert info["n_stars"] > 8000 and set(info["methods"]) == {"maxangle", "pyramid"}
     assert run("db", "verify", str(small_db)).stderr.startswith("OK")
-    target = small_db.resolve() / "pyramid__pairs.npy"
+    target = small_db.resolve() / "pairs__pairs.npy"
     data = bytearray(target.read_bytes())
     data[-1] ^= 0xFF
     target.write_bytes(bytes(data))
     bad = run("db", "verify", str(small_db), ok=False)
-    assert bad.returncode == 1 and "pyramid__pairs.npy" in bad.stderr
+    assert bad.returncode == 1 and "pairs__pairs.npy" in bad.stderr
 
 
 def test_sim_then_solve_reports_against_truth(small_db: Path, tmp_path: Path) -> None:

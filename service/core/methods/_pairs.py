@@ -1,6 +1,16 @@
-"""Star-pair tables sorted by angular separation (the k-vector family's core)."""
+"""Star-pair tables sorted by angular separation (the k-vector family's core).
+
+pyramid, triangle and multifov read one pair table, stored once in the database's shared
+``pairs/`` group (:class:`SharedPairs`): it covers the union of their limits, and each method
+uses the rows within its own (:meth:`SharedPairs.rows`).
+"""
 
 from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -26,6 +36,71 @@ def build_pair_table(vec: FloatArray, max_angle_rad: float, min_angle_rad: float
     order = np.argsort(ang, kind="stable")
     return np.sort(pairs[order], axis=1).astype(np.int32), ang[order]
 
+
+@dataclass(frozen=True)
+class PairLimits:
+    """The pairs one method needs: separations in ``(min_angle_deg, max_angle_deg]``, degrees."""
+
+    max_angle_deg: float
+    min_angle_deg: float = 0.0
+
+
+def pair_limits(config: Any, params: Mapping[str, Any]) -> PairLimits:
+    """Limits of a pair-table method: ``max_angle_deg`` from its build parameters, else the
+    database's largest field ``config.fov_max_deg`` (the image diagonal), degrees."""
+    return PairLimits(float(params.get("max_angle_deg", config.fov_max_deg)))
+
+
+@dataclass(frozen=True)
+class SharedPairs:
+    """One pair table serving several methods (the database's ``pairs/`` group).
+
+    Attributes
+    ----------
+    pairs : (M, 2) int32
+        Star rows, smaller first, sorted by separation.
+    angles : (M,) float64
+        Their separations, radians, ascending.
+    limits : PairLimits
+        What the table holds: the union of its users' limits, degrees.
+    """
+
+    pairs: np.ndarray
+    angles: np.ndarray
+    limits: PairLimits
+
+    def rows(self, limits: PairLimits) -> tuple[int, int]:
+        """Row range ``[start, end)`` of the pairs within ``limits`` (which must lie inside the
+        table's): the pairs ``build_pair_table`` returns for those limits, in the same order
+        (bar a pair within rounding of a limit). The whole table where the limits are the
+        table's own."""
+        own, whole = limits, self.limits
+        if own.max_angle_deg > whole.max_angle_deg or own.min_angle_deg < whole.min_angle_deg:
+            raise ValueError(f"pair limits {own} exceed the shared table's {whole}")
+        start = 0
+        if own.min_angle_deg > whole.min_angle_deg:
+            start = int(np.searchsorted(self.angles, math.radians(own.min_angle_deg), side="right"))
+        end = len(self.angles)
+        if own.max_angle_deg < whole.max_angle_deg:
+            end = int(np.searchsorted(self.angles, math.radians(own.max_angle_deg), side="right"))
+        return start, end
+
+    def view(self, limits: PairLimits) -> tuple[np.ndarray, np.ndarray]:
+        """``(pairs, angles)`` within ``limits``: views of the shared arrays, no copy."""
+        start, end = self.rows(limits)
+        return self.pairs[start:end], self.angles[start:end]
+
+
+def build_shared_pairs(vec: FloatArray, limits: Iterable[PairLimits]) -> SharedPairs:
+    """The pair table of stars ``vec`` ``(N, 3)`` covering every one of ``limits`` (the largest
+    maximum and the smallest minimum separation)."""
+    lim = list(limits)
+    if not lim:
+        raise ValueError("a shared pair table needs at least one user")
+    union = PairLimits(max(x.max_angle_deg for x in lim), min(x.min_angle_deg for x in lim))
+    max_rad, min_rad = math.radians(union.max_angle_deg), math.radians(union.min_angle_deg)
+    pairs, angles = build_pair_table(vec, max_rad, min_rad)
+    return SharedPairs(pairs, angles, union)
 
 
 def directed_edges(pairs: np.ndarray, angles: np.ndarray, lo: float, hi: float) -> np.ndarray:

@@ -5,13 +5,14 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from ..catalog import StarTable
 from ..navdb.reader import NavDatabase
 from ..verify import Observation, Verified, Verifier
+from ._pairs import PairLimits, SharedPairs
 
 Progress = Callable[[str, float], None]
 
@@ -67,4 +68,27 @@ class Method(Protocol):
 
     def matcher(self, db: NavDatabase) -> Matcher:
         """A matcher over the method's tables in ``db``."""
+        ...
+
+
+@runtime_checkable
+class PairMethod(Method, Protocol):
+    """A method that reads the shared star-pair table (the database's ``pairs/`` group).
+
+    The builder asks every such method for its :meth:`pair_limits`, builds one table covering
+    them all, stores it once and passes it to ``build_tables(..., shared=...)``; the reader
+    hands each method its rows of it as ``db.tables[name]["pairs"]`` and ``["angles"]``.
+    Methods without ``pair_limits`` are built as before (``build_tables`` without ``shared``).
+    """
+
+    def pair_limits(self, config: Any, params: dict[str, Any]) -> PairLimits:
+        """Separations the method needs from the pair table, degrees."""
+        ...
+
+    def build_tables(
+        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress,
+        *, shared: SharedPairs | None = None,
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """The method's own arrays (derived from ``shared``'s rows within its limits) and the
+        parameters used; ``shared`` is required."""
         ...

@@ -26,6 +26,8 @@ and returns thousands of pairs per look-up at 60-90 deg. We identify each master
 intra-camera pairs only (out to the field diagonal) and join the cameras through the known
 mounting: a candidate pair of masters is checked by the dot product of the two catalogue
 vectors. The database is the same for any rig whose cameras are no wider than it serves.
+The pair table is the database's shared ``pairs/`` group (pyramid and triangle read it too);
+multifov stores only its segment index over its rows.
 
 Index (``index``): the paper's piecewise-linear fit of pair index against angle in 1-deg
 segments (a k-vector variant, :class:`SegmentIndex`) or ``np.searchsorted`` on the sorted
@@ -57,7 +59,7 @@ from ..navdb.reader import NavDatabase
 from ..types import FloatArray, IntArray
 from ..verify import Verified, star_tree
 from ._grow import screen_and_grow
-from ._pairs import build_pair_table, edge_keys, join_triangles, same_handedness
+from ._pairs import PairLimits, SharedPairs, edge_keys, join_triangles, pair_limits, same_handedness
 from .base import Progress, SolveContext
 
 SEGMENT_DEG = 1.0
@@ -146,18 +148,24 @@ class MultiFov:
     name = "multifov"
     summary = "multi-camera rigs: master stars by voting, brightness + distance triangles (seed 001)"
 
+    def pair_limits(self, config: Any, params: dict[str, Any]) -> PairLimits:
+        """Intra-camera pairs up to ``max_angle_deg`` (default: the database's largest field), degrees."""
+        return pair_limits(config, params)
+
     def build_tables(
-        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress
+        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress,
+        *, shared: SharedPairs | None = None,
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        max_deg = float(params.get("max_angle_deg", config.fov_max_deg))
-        progress("star pairs", 0.0)
-        pairs, angles = build_pair_table(stars.vec, math.radians(max_deg))
+        """Own arrays: the segment index over its rows of the shared pair table."""
+        if shared is None:
+            raise ValueError("multifov reads the shared pair table: build it with navdb.build_database")
+        limits = self.pair_limits(config, params)
+        _, angles = shared.view(limits)
         seg = SegmentIndex.build(angles, math.radians(SEGMENT_DEG))
-        progress(f"{len(pairs)} pairs", 1.0)
-        tables: dict[str, np.ndarray] = {"pairs": pairs, "angles": angles, "seg_start": seg.start,
-                                         "seg_coef": seg.coef, "seg_err": seg.err}
+        progress(f"{len(angles)} pairs", 1.0)
+        tables: dict[str, np.ndarray] = {"seg_start": seg.start, "seg_coef": seg.coef, "seg_err": seg.err}
         meta: dict[str, Any] = {
-            "max_angle_deg": max_deg, "n_pairs": int(len(pairs)), "segment_deg": SEGMENT_DEG,
+            "max_angle_deg": limits.max_angle_deg, "n_pairs": int(len(angles)), "segment_deg": SEGMENT_DEG,
             "index": str(params.get("index", "searchsorted")), "mode": str(params.get("mode", "robust")),
         }
         return tables, meta

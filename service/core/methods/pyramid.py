@@ -1,8 +1,9 @@
 """``pyramid``: star-pair look-ups confirmed by a fourth star (Mortari et al. 2004).
 
-Tables: every catalogue pair closer than ``max_angle_deg``, sorted by angle (binary search on
-the sorted angles plays the role of Mortari's k-vector: both are a range query over a sorted
-array; numpy's ``searchsorted`` is the faster of the two here). Identification: triangles of
+Tables: every catalogue pair closer than ``max_angle_deg``, sorted by angle: the rows of the
+database's shared pair table (``pairs/``) within that limit; pyramid stores no array of its own
+(binary search on the sorted angles plays the role of Mortari's k-vector: both are a range query
+over a sorted array; numpy's ``searchsorted`` is the faster of the two here). Identification: triangles of
 the brightest observed stars in the pyramid order; for each, the catalogue triples whose three
 sides agree within tolerance and whose handedness matches; each is confirmed by projecting the
 catalogue into the image, which demands at least one further star (the "fourth star" of the
@@ -21,10 +22,12 @@ from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
 from ..verify import Verified
 from ._pairs import (
-    build_pair_table,
+    PairLimits,
+    SharedPairs,
     directed_edges,
     edge_keys,
     join_triangles,
+    pair_limits,
     pattern_order,
     same_handedness,
 )
@@ -38,14 +41,21 @@ class Pyramid:
     name = "pyramid"
     summary = "k-vector star pairs, triangles in pyramid order, confirmed by a fourth star (Mortari 2004)"
 
+    def pair_limits(self, config: Any, params: dict[str, Any]) -> PairLimits:
+        """Pairs up to ``max_angle_deg`` (default: the database's largest field), degrees."""
+        return pair_limits(config, params)
+
     def build_tables(
-        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress
+        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress,
+        *, shared: SharedPairs | None = None,
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        max_deg = float(params.get("max_angle_deg", config.fov_max_deg))
-        progress("star pairs", 0.0)
-        pairs, angles = build_pair_table(stars.vec, math.radians(max_deg))
-        progress(f"{len(pairs)} pairs", 1.0)
-        return {"pairs": pairs, "angles": angles}, {"max_angle_deg": max_deg, "n_pairs": int(len(pairs))}
+        """No arrays of its own: the shared pair table's rows within its limits are all it reads."""
+        if shared is None:
+            raise ValueError("pyramid reads the shared pair table: build it with navdb.build_database")
+        limits = self.pair_limits(config, params)
+        _, angles = shared.view(limits)
+        progress(f"{len(angles)} pairs", 1.0)
+        return {}, {"max_angle_deg": limits.max_angle_deg, "n_pairs": int(len(angles))}
 
     def matcher(self, db: NavDatabase) -> PyramidMatcher:
         return PyramidMatcher(db)

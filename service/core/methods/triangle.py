@@ -1,11 +1,13 @@
 """``triangle``: Liebe's classic triangle method (the baseline every paper compares against).
 
 Tables: every catalogue star pair closer than ``max_angle_deg`` (the image diagonal), sorted
-by angular separation. Identification: observed triangles of the brightest stars; for each,
-the three sides are looked up in the pair table (``|d_cat - d_obs| <= eps`` on all three),
-the three windows are joined into catalogue triples, the mirror images dropped, and the
-redundant matches resolved by a fourth star: the shared verifier projects each candidate's
-attitude and keeps the one that explains further stars.
+by angular separation: the rows of the database's shared pair table (``pairs/``) within that
+limit, plus the method's own k-vector over them when built with ``index="kvector"``.
+Identification: observed triangles of the brightest stars; for each, the three sides are
+looked up in the pair table (``|d_cat - d_obs| <= eps`` on all three), the three windows
+are joined into catalogue triples, the mirror images dropped, and the redundant matches
+resolved by a fourth star: the shared verifier projects each candidate's attitude and keeps
+the one that explains further stars.
 
 Faithful parts and the choices made where the classic is vague:
 
@@ -39,7 +41,7 @@ from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
 from ..verify import Verified, check_unique_triangle
-from ._pairs import build_pair_table, edge_keys, join_triangles, same_handedness
+from ._pairs import PairLimits, SharedPairs, edge_keys, join_triangles, pair_limits, same_handedness
 from .base import Progress, SolveContext
 
 MAX_CANDIDATES = 64
@@ -80,22 +82,30 @@ class Triangle:
     name = "triangle"
     summary = "Liebe's classic: star pairs by angle, three sides within tolerance, a fourth star decides"
 
+    def pair_limits(self, config: Any, params: dict[str, Any]) -> PairLimits:
+        """Pairs up to ``max_angle_deg`` (default: the database's largest field), degrees."""
+        return pair_limits(config, params)
+
     def build_tables(
-        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress
+        self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress,
+        *, shared: SharedPairs | None = None,
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        max_deg = float(params.get("max_angle_deg", config.fov_max_deg))
+        """Own arrays: the k-vector over its rows of the shared pair table (``index="kvector"``)."""
+        if shared is None:
+            raise ValueError("triangle reads the shared pair table: build it with navdb.build_database")
+        limits = self.pair_limits(config, params)
         index = str(params.get("index", "searchsorted"))
         if index not in ("searchsorted", "kvector"):
             raise ValueError(f"triangle: unknown index {index!r}")
-        progress("star pairs", 0.0)
-        pairs, angles = build_pair_table(stars.vec, math.radians(max_deg))
-        tables = {"pairs": pairs, "angles": angles}
-        meta: dict[str, Any] = {"max_angle_deg": max_deg, "n_pairs": int(len(pairs)), "index": index}
+        _, angles = shared.view(limits)
+        tables: dict[str, np.ndarray] = {}
+        meta: dict[str, Any] = {"max_angle_deg": limits.max_angle_deg, "n_pairs": int(len(angles)),
+                                "index": index}
         if index == "kvector":
             k, m, q = build_kvector(angles)
             tables["kvector"] = k
             meta.update(kvector_m=m, kvector_q=q)
-        progress(f"{len(pairs)} pairs", 1.0)
+        progress(f"{len(angles)} pairs", 1.0)
         return tables, meta
 
     def matcher(self, db: NavDatabase) -> TriangleMatcher:

@@ -17,12 +17,23 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..catalog import CATALOGUE_NAME, StarTable, load_hipparcos, select_stars
-from .format import FORMAT_NAME, MANIFEST, SCHEMA_VERSION, SET_FORMAT_NAME, array_file, sha256_file
+from .format import (
+    FORMAT_NAME,
+    MANIFEST,
+    SCHEMA_VERSION,
+    SET_FORMAT_NAME,
+    SHARED_GROUPS,
+    array_file,
+    sha256_file,
+)
+
+if TYPE_CHECKING:  # the methods import the reader, which this package exports: import them lazily
+    from ..methods._pairs import SharedPairs
 
 Progress = Callable[[str, float], None]
 """Progress callback: ``(stage description, fraction done in [0, 1])``."""
@@ -157,6 +168,7 @@ def _write_json(path: Path, obj: Any) -> None:
 def _write_member(directory: Path, config: BuildConfig, progress: Progress) -> dict[str, Any]:
     """Write one database (arrays, then the manifest) into ``directory``; return the manifest."""
     from ..methods import get_method, method_names
+    from ..methods.base import PairMethod
 
     t0 = time.perf_counter()
     progress("reading the Hipparcos catalogue", 0.0)
@@ -175,15 +187,25 @@ def _write_member(directory: Path, config: BuildConfig, progress: Progress) -> d
     progress(f"{len(stars)} navigation stars selected", 0.1)
 
     names = method_names() if "all" in config.methods else list(config.methods)
+    clash = sorted(set(names) & {"stars", *SHARED_GROUPS})
+    if clash:
+        raise ValueError(f"method names {clash} clash with database array groups")
+    shared, shared_meta = _write_shared_pairs(directory, stars, config, names, arrays_meta)
+    if shared is not None:
+        progress(f"{len(shared.angles)} star pairs (shared)", 0.2)
     methods_meta: dict[str, Any] = {}
     for i, mname in enumerate(names):
         method = get_method(mname)
-        lo, hi = 0.1 + 0.85 * i / len(names), 0.1 + 0.85 * (i + 1) / len(names)
+        lo, hi = 0.2 + 0.75 * i / len(names), 0.2 + 0.75 * (i + 1) / len(names)
 
         def sub(stage: str, frac: float, lo: float = lo, hi: float = hi, m: str = mname) -> None:
             progress(f"{m}: {stage}", lo + (hi - lo) * frac)
 
-        tables, params = method.build_tables(stars, config, config.method_params.get(mname, {}), sub)
+        params_in = config.method_params.get(mname, {})
+        if isinstance(method, PairMethod) and shared is not None:
+            tables, params = method.build_tables(stars, config, params_in, sub, shared=shared)
+        else:  # the original interface: methods with no shared table (maxangle, radial ...)
+            tables, params = method.build_tables(stars, config, params_in, sub)
         for key, arr in tables.items():
             arrays_meta[f"{mname}/{key}"] = _write_array(directory, f"{mname}/{key}", arr)
         methods_meta[mname] = params
@@ -201,10 +223,39 @@ def _write_member(directory: Path, config: BuildConfig, progress: Progress) -> d
         "n_stars": len(stars),
         "config": asdict(config),
         "methods": methods_meta,
+        "shared": shared_meta,
         "arrays": arrays_meta,
     }
     _write_json(directory / MANIFEST, manifest)
     return manifest
+
+
+def _write_shared_pairs(
+    directory: Path, stars: StarTable, config: BuildConfig, names: list[str], arrays_meta: dict[str, Any]
+) -> tuple[SharedPairs | None, dict[str, Any]]:
+    """Build and write the ``pairs/`` group once for every method in ``names`` that reads it.
+
+    Returns the table (None if no method reads it) and the manifest's ``shared`` section:
+    the table's limits (degrees), its length, and each user's row range ``[start, end)``.
+    """
+    from ..methods import get_method
+    from ..methods._pairs import build_shared_pairs
+    from ..methods.base import PairMethod
+
+    limits = {}
+    for m in names:
+        method = get_method(m)
+        if isinstance(method, PairMethod):
+            limits[m] = method.pair_limits(config, config.method_params.get(m, {}))
+    if not limits:
+        return None, {}
+    shared = build_shared_pairs(stars.vec, limits.values())
+    for key, arr in (("pairs", shared.pairs), ("angles", shared.angles)):
+        arrays_meta[f"pairs/{key}"] = _write_array(directory, f"pairs/{key}", arr)
+    meta = {"max_angle_deg": shared.limits.max_angle_deg, "min_angle_deg": shared.limits.min_angle_deg,
+            "n_pairs": int(len(shared.angles)),
+            "rows": {m: list(shared.rows(lim)) for m, lim in limits.items()}}
+    return shared, {"pairs": meta}
 
 
 def _swap_symlink(out: Path, target: Path) -> None:

@@ -2,8 +2,14 @@
 
 A database is a directory holding ``manifest.json`` and one ``.npy`` file per array. The
 manifest lists, for every array, its file, dtype, shape and sha256, plus the build parameters.
-Arrays are named ``<group>/<name>``: ``stars/hip``, ``stars/vec``, ``stars/mag`` and one group
-per identification method (``pyramid/pairs`` ...). The file of ``a/b`` is ``a__b.npy``.
+Arrays are named ``<group>/<name>``: ``stars/hip``, ``stars/vec``, ``stars/mag``, the *shared*
+groups that several methods read (``pairs/pairs``, ``pairs/angles``: the star-pair table of
+pyramid, triangle and multifov, stored once), and one group per identification method for what
+is its own (``maxangle/ids``, ``triangle/kvector`` ...). The file of ``a/b`` is ``a__b.npy``.
+
+The manifest's ``shared`` section describes each shared group: its build limits and, for every
+method that reads it, the row range ``[start, end)`` that method uses (its own limits on the
+common table). Schema version 1 stored the pair table once per method and is refused.
 
 A database *set* is a directory whose ``manifest.json`` has format ``skyfix-navdb-set`` and
 lists member databases (sub-directories, each a database as above) with the field-of-view range
@@ -17,7 +23,8 @@ from pathlib import Path
 
 FORMAT_NAME = "skyfix-navdb"
 SET_FORMAT_NAME = "skyfix-navdb-set"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+"""2: the star-pair table is one shared group (``pairs/``) instead of one copy per method."""
 MANIFEST = "manifest.json"
 
 STAR_ARRAYS = {
@@ -25,6 +32,13 @@ STAR_ARRAYS = {
     "stars/vec": "<f8",  # (N, 3) ICRS unit vectors at the database epoch
     "stars/mag": "<f4",  # (N,) approximate Johnson V
 }
+
+PAIR_ARRAYS = {
+    "pairs/pairs": "<i4",  # (M, 2) star pairs (row indices into stars/, smaller first)
+    "pairs/angles": "<f8",  # (M,) their separations, radians, ascending
+}
+SHARED_GROUPS = ("pairs",)
+"""Array groups several methods read; no method may be named like one."""
 
 
 def array_file(name: str) -> str:

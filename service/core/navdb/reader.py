@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +17,7 @@ from .format import (
     MANIFEST,
     SCHEMA_VERSION,
     SET_FORMAT_NAME,
+    SHARED_GROUPS,
     STAR_ARRAYS,
     array_file,
     sha256_file,
@@ -27,14 +28,19 @@ from .format import (
 class NavDatabase:
     """An opened navigation database: read-only memory-mapped arrays plus the manifest.
 
-    ``stars`` holds the navigation stars; ``tables[method]`` maps each method's array names to
-    arrays. Every array is a read-only ``np.memmap`` view, so worker processes share pages.
+    ``stars`` holds the navigation stars; ``shared[group]`` the arrays several methods read
+    (``shared["pairs"]``: the star-pair table); ``tables[method]`` maps each method's array
+    names to arrays: its own group, plus, under the shared arrays' names, its rows of every
+    shared group it reads (``tables["pyramid"]["pairs"]`` is a slice of
+    ``shared["pairs"]["pairs"]``, not a copy). Every array is a read-only memory-mapped view,
+    so worker processes share pages.
     """
 
     path: Path
     manifest: dict[str, Any]
     stars: StarTable
     tables: dict[str, dict[str, np.ndarray]]
+    shared: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
     @property
     def methods(self) -> list[str]:
@@ -73,7 +79,8 @@ def _read_manifest(path: Path) -> dict[str, Any]:
     if manifest.get("schema_version") != SCHEMA_VERSION:
         raise DatabaseCorruptError(
             f"{mpath}: schema version {manifest.get('schema_version')!r}, this skyfix reads "
-            f"{SCHEMA_VERSION}; rebuild with `skyfix db build`"
+            f"{SCHEMA_VERSION}; rebuild it with `skyfix db build` (the default database is rebuilt "
+            "on its next use)"
         )
     return manifest
 
@@ -182,9 +189,38 @@ def open_database(path: str | os.PathLike[str], *, verify_hashes: bool = False) 
         if verify_hashes and sha256_file(p / spec["file"]) != spec["sha256"]:
             raise DatabaseCorruptError(f"{p / spec['file']}: sha256 does not match the manifest")
     stars = StarTable(arrays["stars/hip"], arrays["stars/vec"], arrays["stars/mag"])
-    tables: dict[str, dict[str, np.ndarray]] = {}
+    tables: dict[str, dict[str, np.ndarray]] = {m: {} for m in manifest.get("methods", {})}
+    shared: dict[str, dict[str, np.ndarray]] = {}
     for name, arr in arrays.items():
         group, key = name.split("/", 1)
-        if group != "stars":
+        if group in SHARED_GROUPS:
+            shared.setdefault(group, {})[key] = arr
+        elif group != "stars":
             tables.setdefault(group, {})[key] = arr
-    return NavDatabase(p, manifest, stars, tables)
+    _attach_shared(p / MANIFEST, manifest.get("shared", {}), shared, tables)
+    return NavDatabase(p, manifest, stars, tables, shared)
+
+
+def _attach_shared(mpath: Path, spec: Any, shared: dict[str, dict[str, np.ndarray]],
+                   tables: dict[str, dict[str, np.ndarray]]) -> None:
+    """Hand every method its rows of each shared group it reads (manifest ``shared[group]
+    ["rows"][method] = [start, end)``), as views under the shared arrays' names."""
+    if not isinstance(spec, dict) or set(spec) - set(SHARED_GROUPS) or set(shared) - set(spec):
+        raise DatabaseCorruptError(f"{mpath}: shared groups {sorted(shared)} do not match the manifest's")
+    for group, info in spec.items():
+        arrays = shared.get(group)
+        rows = info.get("rows") if isinstance(info, dict) else None
+        if not arrays or not isinstance(rows, dict):
+            raise DatabaseCorruptError(f"{mpath}: shared group {group} has no arrays or no rows")
+        n = {len(a) for a in arrays.values()}
+        if len(n) != 1:
+            raise DatabaseCorruptError(f"{mpath}: arrays of shared group {group} differ in length")
+        length = n.pop()
+        for method, rng in rows.items():
+            ok = isinstance(rng, list) and len(rng) == 2 and all(isinstance(x, int) for x in rng)
+            if not ok or not 0 <= rng[0] <= rng[1] <= length or method not in tables:
+                raise DatabaseCorruptError(f"{mpath}: bad rows {rng!r} of {group} for {method!r}")
+            own = tables[method]
+            if set(own) & set(arrays):
+                raise DatabaseCorruptError(f"{mpath}: {method} has its own {sorted(set(own) & set(arrays))}")
+            own.update({key: arr[rng[0]:rng[1]] for key, arr in arrays.items()})

@@ -57,12 +57,12 @@ def test_truncated_file_is_refused_naming_it(small_db: Path) -> None:
 
 
 def test_corrupted_bytes_caught_by_hash(small_db: Path) -> None:
-    target = small_db.resolve() / "pyramid__angles.npy"
+    target = small_db.resolve() / "pairs__angles.npy"
     data = bytearray(target.read_bytes())
     data[-8:] = b"\x00" * 8
     target.write_bytes(bytes(data))
     open_database(small_db)  # sizes and shapes still fine
-    with pytest.raises(DatabaseCorruptError, match="pyramid__angles.npy"):
+    with pytest.raises(DatabaseCorruptError, match="pairs__angles.npy"):
         open_database(small_db, verify_hashes=True)
 
 

@@ -33,13 +33,13 @@ def build_progress(title: str) -> Iterator[Callable[[str, float], None]]:
 
 def resolve_db(path: Path | None) -> Path:
     """The database to use: ``path``, or the default one (built on first use, with a bar)."""
-    from ..core.navdb import default_database_dir, ensure_default_database
+    from ..core.navdb import default_database_dir, default_database_ready, ensure_default_database
 
     if path is not None:
         return path
     target = default_database_dir() / "default"
-    if (target / "manifest.json").is_file():
+    if default_database_ready():
         return target
-    err_console.print(f"building the default navigation database in {target} (first use)")
+    err_console.print(f"building the default navigation database in {target} (first use or older schema)")
     with build_progress("default database") as cb:
         return ensure_default_database(progress=cb)

@@ -63,9 +63,9 @@ def _default_database() -> Path:
     """Build the default database once, here, before any worker starts (with a progress bar)."""
     from rich.progress import Progress
 
-    from ..core.navdb import default_database_dir, ensure_default_database
+    from ..core.navdb import default_database_ready, ensure_default_database
 
-    if (default_database_dir() / "default" / "manifest.json").is_file():
+    if default_database_ready():
         return ensure_default_database(build=False)
     with Progress(transient=True) as bar:
         task = bar.add_task("building the default navigation database", total=1.0)

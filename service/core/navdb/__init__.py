@@ -1,7 +1,7 @@
 """The navigation database: format, atomic builder, memory-mapped reader, default location."""
 
 from .builder import BuildConfig, build_database, build_database_set, current_epoch
-from .default import default_database_dir, ensure_default_database
+from .default import default_database_dir, default_database_ready, ensure_default_database
 from .reader import NavDatabase, NavDatabaseSet, open_database
 
 __all__ = [
@@ -12,6 +12,7 @@ __all__ = [
     "build_database_set",
     "current_epoch",
     "default_database_dir",
+    "default_database_ready",
     "ensure_default_database",
     "open_database",
 ]

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
 from ..errors import DatabaseMissingError
 from .builder import BuildConfig, Progress, _noop, build_database_set
+from .format import MANIFEST, SCHEMA_VERSION
 
 DEFAULT_NAME = "default"
 
@@ -40,11 +42,38 @@ def default_database_dir() -> Path:
     return Path(cache) / "skyfix" / "db"
 
 
-def ensure_default_database(*, progress: Progress = _noop, build: bool = True) -> Path:
-    """Path of the default database, building it first if it is missing."""
+def _older_schema(path: Path) -> int | None:
+    """The schema version of the database at ``path`` if it is older than this skyfix reads
+    (a readable manifest with a smaller integer ``schema_version``), else None."""
+    try:
+        version = json.loads((path / MANIFEST).read_text()).get("schema_version")
+    except (OSError, ValueError, AttributeError):
+        return None  # missing or unreadable: opening reports it
+    return version if isinstance(version, int) and version < SCHEMA_VERSION else None
+
+
+def default_database_ready() -> bool:
+    """True if the default database exists and is of the current schema (nothing to build)."""
     path = default_database_dir() / DEFAULT_NAME
-    if (path / "manifest.json").is_file():
+    return (path / MANIFEST).is_file() and _older_schema(path) is None
+
+
+def ensure_default_database(
+    *, progress: Progress = _noop, build: bool = True, members: dict[str, BuildConfig] | None = None
+) -> Path:
+    """Path of the default database, building it first if it is missing or was built by an
+    older skyfix (an older schema version: it is replaced atomically; it is a cache of the
+    bundled catalogue, so nothing is lost). ``members`` overrides ``DEFAULT_MEMBERS``.
+
+    A manifest that is unreadable or of a *newer* schema is left alone: opening it names the
+    problem. With ``build=False`` a missing or old database raises ``DatabaseMissingError``.
+    """
+    path = default_database_dir() / DEFAULT_NAME
+    old = _older_schema(path)
+    if (path / MANIFEST).is_file() and old is None:
         return path
     if not build:
-        raise DatabaseMissingError(f"no default database at {path}; run `skyfix db build`")
-    return build_database_set(path, DEFAULT_MEMBERS, progress=progress)
+        why = "no default database" if old is None else f"the default database (schema {old}) is outdated"
+        raise DatabaseMissingError(f"{why} at {path}; any `skyfix` command without a database argument "
+                                   "(e.g. `skyfix db info`) rebuilds it")
+    return build_database_set(path, DEFAULT_MEMBERS if members is None else members, progress=progress)

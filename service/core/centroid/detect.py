@@ -42,7 +42,7 @@ from .background import tile_statistics
 from .blobs import find_sources
 from .measure import gather_stamps, psf_sigma_from_stamps, sharpness, windowed_centroid
 from .sparse import label_pixels, threshold_pixels
-from .stellar import significance_deficit
+from .stellar import quiet_noise, significance_deficit
 
 __all__ = ["Detections", "extract"]
 
@@ -56,6 +56,7 @@ _HOT_NOISE = 2.0 / math.sqrt(8.0)
 # 0.6 px PSF with a matched window, 0.007 px with a 1.2 px one; see docs/centroiding.md).
 _WINDOW_PER_PSF = 0.9
 _MIN_WINDOW_PX = 1.2
+_WHITE_RATIO = 1.25
 
 
 @dataclass(frozen=True, slots=True)
@@ -237,7 +238,13 @@ def extract(
         xy[idx, 1] = py[idx] + np.where(ok, yw, y0)
         flux[idx] = weighted * (psf_sigma**2 + sig**2) / sig**2  # total of a Gaussian star
     if min_significance_ratio is not None:
-        star &= ~significance_deficit(snr, flux, star & ~saturated, min_ratio=min_significance_ratio)
+        # Clutter-free noise: at most that of the quiet tiles at this background level (shot
+        # noise of glare is forgiven) and at most what white noise of the local raw sigma would
+        # leave after the filter (texture survives the filter, pixel noise does not).
+        ratio = det_sigma / raw_sigma  # filtered / raw noise: higher where texture, not pixel noise
+        quiet = quiet_noise(det_grid.level, det_sigma, det_grid.at(det_grid.level, px, py),
+                            ratio <= _WHITE_RATIO * float(np.median(ratio)))
+        star &= ~significance_deficit(snr, flux, star & ~saturated, quiet, min_ratio=min_significance_ratio)
 
     sel = np.flatnonzero(star)
     sel = sel[np.argsort(-flux[sel], kind="stable")]

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -31,8 +32,9 @@ from scipy.special import betainc
 from .attitude import ARCSEC_PER_RAD, wahba_svd
 from .camera import Camera
 from .geometry import cross
+from .match import RigArrays, match_rig, refine, rig_arrays
 from .navdb.reader import NavDatabase
-from .screen import camera_kernel_params, project_and_pair, screen_hits
+from .screen import screen_hits
 from .skygrid import SkyGrid, build_sky_grid
 from .types import FloatArray, IntArray
 
@@ -72,6 +74,11 @@ class Observation:
 
     def __len__(self) -> int:
         return int(self.vec.shape[0])
+
+    @cached_property
+    def kernel_arrays(self) -> RigArrays:
+        """The cameras as plain arrays for the compiled kernels (built once)."""
+        return rig_arrays(self.cameras, self.mountings, self.by_camera)
 
     @property
     def pixel_scale_rad(self) -> float:
@@ -189,26 +196,22 @@ class Verifier:
         stars = self.db.stars.vec
         obs = self.obs
         r = wahba_svd(obs.vec[obs_idx], stars[cat_idx])
-        # quick reject: the hypothesis' own stars must fit the attitude
-        scale = obs.pixel_scale_rad
-        pred = stars[cat_idx] @ r.T
-        err = np.linalg.norm(pred - obs.vec[obs_idx], axis=1)
-        if np.any(err > self.match_radius_px * scale * 1.5):
+        near, near_off = self._near(r)
+        k = obs.kernel_arrays
+        # quick reject (the hypothesis' own stars must fit), pair, and refit with every pair
+        # while the pairs grow (a compact hypothesis in a wide field extrapolates poorly at
+        # first); ``r`` ends fitted to the pairs kept. One compiled call (match.refine).
+        ok, m_obs, m_cat, p_single, r = refine(
+            obs.vec, obs.xy, stars, obs_idx, cat_idx, r, self.match_radius_px * obs.pixel_scale_rad * 1.5,
+            near, near_off, k, self.match_radius_px, max_refits=4)
+        if not ok:
             return None
-        m_obs, m_cat, p_single = self._match_all(r)
-        if len(m_obs) < max(len(obs_idx), 3):
+        basin = self._settle(r, len(m_obs))
+        if basin is None:
             return None
-        # refit with every pair while the pairs grow (a compact hypothesis in a wide field
-        # extrapolates poorly at first); ``r`` always ends fitted to the pairs kept
-        for _ in range(4):
-            r = wahba_svd(obs.vec[m_obs], stars[m_cat])
-            grown = self._match_all(r)
-            if len(grown[0]) <= len(m_obs):
-                break
-            m_obs, m_cat, p_single = grown
-        else:
-            r = wahba_svd(obs.vec[m_obs], stars[m_cat])
-        hyp = np.isin(m_obs, obs_idx)
+        if basin[0] is not None:
+            m_obs, m_cat, p_single, r = basin
+        hyp = (m_obs[:, None] == obs_idx[None, :]).any(axis=1)
         n_extra = int(len(m_obs) - hyp.sum())
         n_free = len(obs) - len(obs_idx)
         if len(m_obs) < self.min_matches or n_extra < 1:
@@ -226,30 +229,49 @@ class Verifier:
             return None
         return found
 
+    def _settle(self, r: FloatArray, n_pairs: int) -> tuple | None:
+        """Near-miss test of an attitude with ``n_pairs`` pairs at the match radius.
+
+        A slightly rotated attitude (a false star or a wrong pair in the hypothesis pulls the
+        fit a few pixels off) matches only the stars near its pivot, and many more at three
+        match radii; a right one matches about as many at both. When the wide pairing grows by
+        more than ``max(3, n_pairs / 3)``, the attitude is refitted to the wide pairs and the
+        pairing redone at the match radius: the answer of that basin is returned if it pairs
+        more stars, else None (refused). ``(None,)`` means the attitude is settled.
+        """
+        near, near_off = self._near(r)
+        k = self.obs.kernel_arrays
+        w_obs, w_cat, _ = match_rig(r, self.obs.xy, self.db.stars.vec, near, near_off, k, 3 * self.match_radius_px)
+        if len(w_obs) <= n_pairs + max(3, n_pairs // 3):
+            return (None,)
+        r2 = wahba_svd(self.obs.vec[w_obs], self.db.stars.vec[w_cat])
+        ok, m_obs, m_cat, p_single, r2 = refine(
+            self.obs.vec, self.obs.xy, self.db.stars.vec, w_obs[:0], w_cat[:0], r2, 1.0, near, near_off, k,
+            self.match_radius_px, max_refits=4)
+        if not ok or len(m_obs) <= n_pairs:
+            return None
+        return m_obs, m_cat, p_single, r2
+
     def _match_all(self, r_body: FloatArray) -> tuple[IntArray, IntArray, float]:
         """Pair observed and predicted stars in every camera; also return the chance that a
         random point falls within the match radius of a predicted star."""
-        obs = self.obs
-        stars = self.db.stars.vec
-        all_obs: list[IntArray] = []
-        all_cat: list[IntArray] = []
-        area = 0.0
-        covered = 0.0
-        rad2 = self.match_radius_px**2
-        for c, cam in enumerate(obs.cameras):
-            r_cam = obs.mountings[c] @ r_body
-            half = math.radians(cam.diagonal_fov_deg / 2 + 0.2)
-            near = np.asarray(star_tree(self.db).query_ball_point(r_cam[2], 2 * math.sin(half / 2)), dtype=np.int64)
-            rows = obs.by_camera[c]
-            pair_obs, pair_cat, n_inside = project_and_pair(stars[near] @ r_cam.T, camera_kernel_params(cam),
-                                                            obs.xy[rows], self.match_radius_px)
-            area += cam.width * cam.height
-            covered += n_inside * math.pi * rad2
-            all_obs.append(rows[pair_obs])
-            all_cat.append(near[pair_cat])
-        if not all_obs:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64), 1.0
-        return np.concatenate(all_obs), np.concatenate(all_cat), covered / max(area, 1.0)
+        near, near_off = self._near(r_body)
+        return match_rig(r_body, self.obs.xy, self.db.stars.vec, near, near_off, self.obs.kernel_arrays,
+                         self.match_radius_px)
+
+    def _near(self, r_body: FloatArray) -> tuple[IntArray, IntArray]:
+        """Catalogue rows within each camera's diagonal half-field (+ 0.5 deg) of its
+        boresight under ``r_body``, concatenated, with per-camera offsets."""
+        tree = star_tree(self.db)
+        parts = []
+        for cam, mount in zip(self.obs.cameras, self.obs.mountings, strict=True):
+            half = math.radians(cam.diagonal_fov_deg / 2 + 0.5)
+            parts.append(tree.query_ball_point((mount @ r_body)[2], 2 * math.sin(half / 2)))
+        off = np.zeros(len(parts) + 1, np.int64)
+        off[1:] = np.cumsum([len(x) for x in parts])
+        near = np.fromiter((i for x in parts for i in x), np.int64, int(off[-1])) if len(parts) > 1 else \
+            np.asarray(parts[0], dtype=np.int64)
+        return near, off
 
 
 def _consistent_pairs(a: Verified, b: Verified) -> bool:

@@ -286,9 +286,14 @@ def build_skyfix_db(preset: Preset, methods: Sequence[str], path: Path, *, reuse
     written while this harness runs). Times the build per method from the progress stages."""
     side = path.parent / f"{path.name}.bench.json"
     if reuse and (path / "manifest.json").is_file() and side.is_file():
-        rep = DbReport(**json.loads(side.read_text()))
-        log(f"  reusing {path} (built in {rep.build_s:.1f} s)")
-        return path, rep
+        try:
+            open_database(path)
+        except Exception as exc:  # another schema (an older skyfix): rebuild
+            log(f"  not reusing {path}: {exc}")
+        else:
+            rep = DbReport(**json.loads(side.read_text()))
+            log(f"  reusing {path} (built in {rep.build_s:.1f} s)")
+            return path, rep
     failed: dict[str, str] = {}
     todo = list(methods)
     while True:
@@ -331,7 +336,8 @@ def build_skyfix_db(preset: Preset, methods: Sequence[str], path: Path, *, reuse
     rep = DbReport(
         solver="skyfix", preset=preset.name, path=str(path), build_s=round(total, 3), size_bytes=dir_bytes(path),
         open_ms=None, per_method_build_s=per,
-        per_method_bytes={m: _array_bytes(manifest, f"{m}/") for m in todo}, methods=list(todo), failed=failed,
+        per_method_bytes={m: _array_bytes(manifest, f"{m}/") for m in [*todo, "pairs"]}, methods=list(todo),
+        failed=failed,
         note=f"{manifest.get('n_stars')} stars to {preset.mag_limit} Mv",
     )
     side.write_text(json.dumps(asdict(rep), indent=1))

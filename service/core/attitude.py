@@ -114,6 +114,39 @@ def radec_roll(r: FloatArray) -> tuple[float, float, float]:
     return math.degrees(ra), math.degrees(dec), roll
 
 
+@njit(cache=True, nogil=True)
+def _fit_stats(obs: np.ndarray, ref: np.ndarray, r: np.ndarray,
+               sigma_rad: float) -> tuple[np.ndarray, float, np.ndarray]:
+    """Compiled body of :func:`estimate`: residuals (arcsec), their RMS, and the 1-sigma
+    errors (arcsec) about x, y, z from the information matrix ``sum (I - v v^T)``; a negative
+    ``sigma_rad`` means "from the RMS"."""
+    n = len(obs)
+    res = np.empty(n)
+    info = np.zeros((3, 3))
+    ss = 0.0
+    for i in range(n):
+        c2 = 0.0
+        for a in range(3):
+            d = obs[i, a] - (r[a, 0] * ref[i, 0] + r[a, 1] * ref[i, 1] + r[a, 2] * ref[i, 2])
+            c2 += d * d
+            for b in range(3):
+                info[a, b] -= obs[i, a] * obs[i, b]
+        res[i] = 2.0 * math.asin(min(math.sqrt(c2) / 2.0, 1.0)) * ARCSEC_PER_RAD
+        ss += res[i] * res[i]
+    for a in range(3):
+        info[a, a] += n
+    rms = math.sqrt(ss / n) if n else np.nan
+    sig = sigma_rad
+    if sig < 0:
+        sig = max(rms / ARCSEC_PER_RAD * math.sqrt(n / max(n - 3, 1)), 1e-7) if n else 1e-7
+    sd = np.full(3, np.inf)
+    if abs(np.linalg.det(info)) > 1e-12:
+        cov = np.linalg.inv(info) * sig * sig
+        for a in range(3):
+            sd[a] = math.sqrt(max(cov[a, a], 0.0)) * ARCSEC_PER_RAD
+    return res, rms, sd
+
+
 def wahba_svd(obs: FloatArray, ref: FloatArray, weights: FloatArray | None = None) -> FloatArray:
     """Rotation ``R`` (3, 3) minimising ``sum w_i |obs_i - R ref_i|^2`` (Markley's SVD method).
 
@@ -193,16 +226,8 @@ def estimate(
     ``sigma_rad`` is the per-star measurement error; by default the fit's own RMS residual.
     ``matrix`` is the least-squares fit to these pairs when the caller already has it.
     """
-    r = wahba_svd(obs, ref) if matrix is None else matrix
-    res = residuals_arcsec(obs, ref, r)
-    rms = float(np.sqrt(np.mean(res**2))) if len(res) else float("nan")
-    n = len(obs)
-    sig = sigma_rad if sigma_rad is not None else max(rms / ARCSEC_PER_RAD * math.sqrt(n / max(n - 3, 1)),
-                                                      1e-7)
-    info = np.eye(3) * n - obs.T @ obs  # sum (I - v v^T)
-    try:
-        cov = np.linalg.inv(info) * sig**2
-        sd = tuple(float(math.sqrt(max(c, 0.0)) * ARCSEC_PER_RAD) for c in np.diag(cov))
-    except np.linalg.LinAlgError:
-        sd = (float("inf"),) * 3
-    return AttitudeEstimate(r, matrix_to_quat(r), res, rms, sd)  # type: ignore[arg-type]
+    r = wahba_svd(obs, ref) if matrix is None else np.asarray(matrix, dtype=np.float64)
+    res, rms, sd = _fit_stats(np.ascontiguousarray(obs, dtype=np.float64), np.ascontiguousarray(ref, dtype=np.float64),
+                              np.ascontiguousarray(r), -1.0 if sigma_rad is None else float(sigma_rad))
+    sd = (float(sd[0]), float(sd[1]), float(sd[2]))
+    return AttitudeEstimate(r, matrix_to_quat(r), res, float(rms), sd)  # type: ignore[arg-type]

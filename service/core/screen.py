@@ -41,7 +41,7 @@ def screen_hits(obs_vec: FloatArray, obs_tris: IntArray, cands: IntArray, others
                    np.ascontiguousarray(obs_tris, dtype=np.int64).reshape(-1, 3),
                    np.ascontiguousarray(cands, dtype=np.int64).reshape(-1, 3),
                    np.ascontiguousarray(others, dtype=np.int64), float(chord),
-                   grid.cell, grid.n_side, grid.keys, grid.starts, grid.stars, grid.vec)
+                   grid.cell, grid.n_side, grid.keys, grid.starts, grid.stars, grid.vec, grid.columns)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -72,7 +72,7 @@ def _frame(a: np.ndarray, b: np.ndarray, c: np.ndarray, out: np.ndarray) -> floa
 @njit(cache=True, nogil=True)
 def _screen(obs_vec: np.ndarray, obs_tris: np.ndarray, cands: np.ndarray, others: np.ndarray,
             chord: float, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray,
-            stars: np.ndarray, star_vec: np.ndarray) -> np.ndarray:
+            stars: np.ndarray, star_vec: np.ndarray, columns: np.ndarray) -> np.ndarray:
     k_total = len(cands)
     hits = np.zeros(k_total, dtype=np.int64)
     fo = np.empty((3, 3))
@@ -98,7 +98,7 @@ def _screen(obs_vec: np.ndarray, obs_tris: np.ndarray, cands: np.ndarray, others
             px = fc[0, 0] * l0 + fc[0, 1] * l1 + fc[0, 2] * l2
             py = fc[1, 0] * l0 + fc[1, 1] * l1 + fc[1, 2] * l2
             pz = fc[2, 0] * l0 + fc[2, 1] * l1 + fc[2, 2] * l2
-            if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, c0, c1, c2):
+            if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, c0, c1, c2):
                 count += 1
         hits[k] = count
     return hits

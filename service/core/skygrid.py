@@ -5,8 +5,10 @@ scipy's ``cKDTree`` answers that question well from Python, but a compiled hot l
 verifier's screen, run for hundreds of hypotheses a frame) cannot call it. The grid cuts the
 cube ``[-1, 1]^3`` into cells of side ``cell`` (unit-vector coordinates, i.e. about radians);
 each occupied cell is one sorted int64 key ``(ix * K + iy) * K + iz`` with its stars stored
-contiguously (CSR), so a lookup is a binary search per touched cell. Any query radius works: a
-lookup scans every cell the query ball overlaps (8 cells when the radius is under half a cell).
+contiguously (CSR). A dense ``(ix, iy)`` column index points at each column's few occupied
+cells (a column crosses the sphere at most twice), so a lookup is two array reads and a short
+scan per touched column, without a binary search. Any query radius works: a lookup scans every
+cell the query ball overlaps.
 """
 
 from __future__ import annotations
@@ -40,6 +42,8 @@ class SkyGrid:
         Cell ``i`` holds ``stars[starts[i]:starts[i + 1]]``.
     stars : (N,) int64
         Star rows, grouped by cell.
+    columns : (n_side * n_side + 1,) int64
+        Column ``ix * n_side + iy`` holds the cells ``keys[columns[c]:columns[c + 1]]``.
     vec : (N, 3) float64
         The star vectors (rows of the star table), for distance checks.
     """
@@ -50,6 +54,7 @@ class SkyGrid:
     starts: np.ndarray
     stars: np.ndarray
     vec: np.ndarray
+    columns: np.ndarray
 
 
 def build_sky_grid(vec: FloatArray, cell_rad: float = DEFAULT_CELL_RAD) -> SkyGrid:
@@ -61,13 +66,14 @@ def build_sky_grid(vec: FloatArray, cell_rad: float = DEFAULT_CELL_RAD) -> SkyGr
     order = np.argsort(key, kind="stable")
     keys, first = np.unique(key[order], return_index=True)
     starts = np.append(first, len(order)).astype(np.int64)
-    return SkyGrid(float(cell_rad), n_side, keys.astype(np.int64), starts, order.astype(np.int64), vec)
+    columns = np.searchsorted(keys // n_side, np.arange(n_side * n_side + 1)).astype(np.int64)
+    return SkyGrid(float(cell_rad), n_side, keys.astype(np.int64), starts, order.astype(np.int64), vec, columns)
 
 
 @njit(cache=True, nogil=True)
 def has_star_within(px: float, py: float, pz: float, chord: float, cell: float, n_side: int,
                     keys: np.ndarray, starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
-                    skip0: int, skip1: int, skip2: int) -> bool:
+                    columns: np.ndarray, skip0: int, skip1: int, skip2: int) -> bool:
     """True if some star other than rows ``skip0..2`` lies within ``chord`` (unit-vector
     distance) of the point ``(px, py, pz)``."""
     lo_x = max(int(math.floor((px - chord + 1.0) / cell)), 0)
@@ -79,11 +85,13 @@ def has_star_within(px: float, py: float, pz: float, chord: float, cell: float, 
     r2 = chord * chord
     for ix in range(lo_x, hi_x + 1):
         for iy in range(lo_y, hi_y + 1):
-            for iz in range(lo_z, hi_z + 1):
-                k = (ix * n_side + iy) * n_side + iz
-                pos = np.searchsorted(keys, k)
-                if pos >= len(keys) or keys[pos] != k:
+            col = ix * n_side + iy
+            for pos in range(columns[col], columns[col + 1]):
+                iz = keys[pos] - col * n_side
+                if iz < lo_z:
                     continue
+                if iz > hi_z:
+                    break
                 for s in range(starts[pos], starts[pos + 1]):
                     row = stars[s]
                     if row == skip0 or row == skip1 or row == skip2:
@@ -100,14 +108,15 @@ def stars_within(grid: SkyGrid, points: FloatArray, chord: float) -> np.ndarray:
     """Mask ``(M,)``: has each point ``(M, 3)`` a star within ``chord``? (Python entry, for
     tests and occasional use; the kernels call :func:`has_star_within` directly.)"""
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    return _stars_within(pts, float(chord), grid.cell, grid.n_side, grid.keys, grid.starts, grid.stars, grid.vec)
+    return _stars_within(pts, float(chord), grid.cell, grid.n_side, grid.keys, grid.starts, grid.stars, grid.vec,
+                         grid.columns)
 
 
 @njit(cache=True, nogil=True)
 def _stars_within(pts: np.ndarray, chord: float, cell: float, n_side: int, keys: np.ndarray,
-                  starts: np.ndarray, stars: np.ndarray, vec: np.ndarray) -> np.ndarray:
+                  starts: np.ndarray, stars: np.ndarray, vec: np.ndarray, columns: np.ndarray) -> np.ndarray:
     out = np.zeros(len(pts), dtype=np.bool_)
     for i in range(len(pts)):
         out[i] = has_star_within(pts[i, 0], pts[i, 1], pts[i, 2], chord, cell, n_side, keys, starts,
-                                 stars, vec, -1, -1, -1)
+                                 stars, vec, columns, -1, -1, -1)
     return out

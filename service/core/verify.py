@@ -115,6 +115,7 @@ class Verifier:
     """``time.perf_counter()`` after which no further hypothesis is checked."""
     marginal: list[Verified] = field(default_factory=list)
     _first_marginal_at: int | None = None
+    _near_cache: tuple[FloatArray, IntArray, IntArray] | None = field(default=None, repr=False)
 
     def settled(self) -> bool:
         """True once a marginal answer has had ``confirm_patterns`` patterns to be beaten."""
@@ -260,18 +261,30 @@ class Verifier:
                          self.match_radius_px)
 
     def _near(self, r_body: FloatArray) -> tuple[IntArray, IntArray]:
-        """Catalogue rows within each camera's diagonal half-field (+ 0.5 deg) of its
-        boresight under ``r_body``, concatenated, with per-camera offsets."""
+        """Catalogue rows within each camera's diagonal half-field + ``NEAR_MARGIN_DEG`` of its
+        boresight under ``r_body``, concatenated, with per-camera offsets. The last answer is
+        reused while the attitude stays within ``NEAR_MARGIN_DEG - 0.2`` deg of the one it was
+        asked for (refits and the near-miss test move it by arcseconds to arcminutes)."""
+        cached = self._near_cache
+        # rotation angle between the two attitudes (bounds every camera's boresight move)
+        if cached is not None and (float(np.sum(cached[0] * r_body)) - 1) / 2 >= _NEAR_REUSE_COS:
+            return cached[1], cached[2]
         tree = star_tree(self.db)
         parts = []
         for cam, mount in zip(self.obs.cameras, self.obs.mountings, strict=True):
-            half = math.radians(cam.diagonal_fov_deg / 2 + 0.5)
+            half = math.radians(cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG)
             parts.append(tree.query_ball_point((mount @ r_body)[2], 2 * math.sin(half / 2)))
         off = np.zeros(len(parts) + 1, np.int64)
         off[1:] = np.cumsum([len(x) for x in parts])
         near = np.fromiter((i for x in parts for i in x), np.int64, int(off[-1])) if len(parts) > 1 else \
             np.asarray(parts[0], dtype=np.int64)
+        self._near_cache = (np.array(r_body, dtype=np.float64), near, off)
         return near, off
+
+
+NEAR_MARGIN_DEG = 0.5
+"""Catalogue stars are gathered this far beyond each image's half-diagonal."""
+_NEAR_REUSE_COS = math.cos(math.radians(NEAR_MARGIN_DEG - 0.2))
 
 
 def _consistent_pairs(a: Verified, b: Verified) -> bool:

@@ -205,7 +205,7 @@ def run_real(args: argparse.Namespace, peers: Peers, pdir: Path) -> dict[str, An
         from service.core.navdb.default import DEFAULT_MEMBERS
 
         t0 = time.perf_counter()
-        if not (args.reuse_db and (path / "manifest.json").is_file()):
+        if not (args.reuse_db and (path / "manifest.json").is_file() and common.opens(path)):
             build_database_set(path, DEFAULT_MEMBERS)
         build_s, what = time.perf_counter() - t0, "skyfix's default database set (narrow 8.0 Mv + wide 6.5 Mv)"
     except ImportError:

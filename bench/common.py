@@ -279,21 +279,27 @@ def remove_db(path: Path) -> None:
         shutil.rmtree(path, ignore_errors=True)
 
 
+def opens(path: Path, log: Callable[[str], None] = print) -> bool:
+    """True if the database (or set) at ``path`` opens with this skyfix (an older schema does
+    not: it must be rebuilt)."""
+    try:
+        open_database(path)
+    except Exception as exc:
+        log(f"  not reusing {path}: {exc}")
+        return False
+    return True
+
+
 def build_skyfix_db(preset: Preset, methods: Sequence[str], path: Path, *, reuse: bool = False,
                     log: Callable[[str], None] = print) -> tuple[Path, DbReport]:
     """Build (or, with ``reuse``, keep) one database with every method in ``methods`` that
     builds; a method whose build raises is left out and reported (other methods are being
     written while this harness runs). Times the build per method from the progress stages."""
     side = path.parent / f"{path.name}.bench.json"
-    if reuse and (path / "manifest.json").is_file() and side.is_file():
-        try:
-            open_database(path)
-        except Exception as exc:  # another schema (an older skyfix): rebuild
-            log(f"  not reusing {path}: {exc}")
-        else:
-            rep = DbReport(**json.loads(side.read_text()))
-            log(f"  reusing {path} (built in {rep.build_s:.1f} s)")
-            return path, rep
+    if reuse and (path / "manifest.json").is_file() and side.is_file() and opens(path, log):
+        rep = DbReport(**json.loads(side.read_text()))
+        log(f"  reusing {path} (built in {rep.build_s:.1f} s)")
+        return path, rep
     failed: dict[str, str] = {}
     todo = list(methods)
     while True:

@@ -117,7 +117,7 @@ def solve_rig(
     else:
         members, deepest = [db], db
     fov = max(cam.fov_deg for _, cam, _ in frames)
-    method_lists = [resolve(m, method, fov_deg=fov) for m in members]
+    method_lists = [resolve(m, method, fov_deg=fov, sigma_px=options.centroid_sigma_px) for m in members]
     mountings = _mountings or [np.eye(3) if m is None else quat_to_matrix(np.asarray(m, float)) for _, _, m in frames]
     obs = _observation(frames, mountings)
     t1 = time.perf_counter()

@@ -62,16 +62,24 @@ def get_matcher(db: NavDatabase, name: str) -> Matcher:
 
 
 WIDE_FIELD_DEG = 15.0
+WIDE_NOISY_PX = 1.5
 WIDE_AUTO_ORDER: tuple[str, ...] = ("pso", "dmv", "maxangle", "pyramid", "triangle")
-"""For fields of ``WIDE_FIELD_DEG`` and more: bench_methods measured ``pso`` and ``dmv`` at 100%
-on the 20-deg camera up to 2 px, where ``maxangle`` and ``pyramid`` fall to about a third."""
+"""For fields of ``WIDE_FIELD_DEG`` and more at a declared centroid error of ``WIDE_NOISY_PX``
+or more. bench_methods (100 frames a point, git 8701d30) on the 20-deg camera (seed 004):
+``maxangle`` 100% up to 1.25 px at 0.6-3.2 ms median, 98% at 1.5 px (11 ms), 71% at 1.75 px
+(43 ms), 35% at 2 px (105 ms), where ``pso`` holds 100% at 2.4-4.8 ms and ``dmv`` 100%; on the
+15.2-deg camera (seed 003) ``maxangle`` holds 100% to 2 px (0.4-2.5 ms). So below
+``WIDE_NOISY_PX`` a wide field keeps ``AUTO_ORDER`` (maxangle first: 4x faster than pso at
+0 px), and from it on pso and dmv go first."""
 
 
-def resolve(db: NavDatabase, name: str, *, fov_deg: float | None = None) -> list[str]:
+def resolve(db: NavDatabase, name: str, *, fov_deg: float | None = None, sigma_px: float | None = None) -> list[str]:
     """Methods to try for ``name``: ``auto`` expands to those ``db`` has, in the order measured
-    best for a camera of horizontal field ``fov_deg``."""
+    best for a camera of horizontal field ``fov_deg`` at centroid error ``sigma_px``."""
     if name == "auto":
-        first = WIDE_AUTO_ORDER if fov_deg is not None and fov_deg >= WIDE_FIELD_DEG else AUTO_ORDER
+        wide = fov_deg is not None and fov_deg >= WIDE_FIELD_DEG
+        noisy = sigma_px is None or sigma_px >= WIDE_NOISY_PX
+        first = WIDE_AUTO_ORDER if wide and noisy else AUTO_ORDER
         order = [m for m in first if m in db.tables]
         order += [m for m in method_names() if m in db.tables and m not in order]
         return order
@@ -81,4 +89,4 @@ def resolve(db: NavDatabase, name: str, *, fov_deg: float | None = None) -> list
     return [name]
 
 
-__all__ = ["AUTO_ORDER", "WIDE_AUTO_ORDER", "Matcher", "Method", "SolveContext", "get_matcher", "get_method", "method_names", "resolve"]
+__all__ = ["AUTO_ORDER", "WIDE_AUTO_ORDER", "WIDE_FIELD_DEG", "WIDE_NOISY_PX", "Matcher", "Method", "SolveContext", "get_matcher", "get_method", "method_names", "resolve"]

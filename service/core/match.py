@@ -59,19 +59,20 @@ def rig_arrays(cameras: Sequence[Any], mountings: Sequence[np.ndarray], by_camer
 
 
 def match_rig(r_body: FloatArray, obs_xy: FloatArray, star_vec: FloatArray, near: IntArray, near_off: IntArray,
-              rig: RigArrays, radius_px: float) -> tuple[IntArray, IntArray, float]:
+              rig: RigArrays, radius_px: float, *, crowd: float = 2.0) -> tuple[IntArray, IntArray, float]:
     """Pair observed stars (pixel positions ``obs_xy``) with the catalogue stars ``near``
     (rows of ``star_vec``; camera ``c``'s are ``near[near_off[c]:near_off[c + 1]]``) projected
     under the ICRS -> body rotation ``r_body``.
 
     A pair is kept only when unambiguous: within ``radius_px``, and no other candidate on
-    either side within twice that (a false star beside a real one, a catalogue double, or a
-    noisy star nearer its neighbour's prediction than its own proves nothing). Returns
+    either side within ``crowd`` times that (a false star beside a real one, a catalogue
+    double, or a noisy star nearer its neighbour's prediction than its own proves nothing;
+    ``crowd = 1`` keeps pairs that are alone within the radius itself). Returns
     ``(obs_rows, star_rows, p)`` with ``p`` the fraction of the image area within
     ``radius_px`` of a predicted star (the chance a random point matches).
     """
     return _match_rig(np.ascontiguousarray(r_body, dtype=np.float64), obs_xy, star_vec, near, near_off,
-                      rig.mounts, rig.cams, rig.dist, rig.rows, rig.row_off, float(radius_px))
+                      rig.mounts, rig.cams, rig.dist, rig.rows, rig.row_off, float(radius_px), float(crowd))
 
 
 def refine(obs_vec: FloatArray, obs_xy: FloatArray, star_vec: FloatArray, hyp_obs: IntArray, hyp_cat: IntArray,
@@ -96,7 +97,7 @@ def refine(obs_vec: FloatArray, obs_xy: FloatArray, star_vec: FloatArray, hyp_ob
 
 @njit(cache=True, nogil=True)
 def _project_and_pair(cam_vec: np.ndarray, f: float, cx: float, cy: float, w: int, h: int, dist: np.ndarray,
-                      obs_xy: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, int]:
+                      obs_xy: np.ndarray, radius: float, crowd: float) -> tuple[np.ndarray, np.ndarray, int]:
     n_pred = len(cam_vec)
     pxy = np.empty((n_pred, 2))
     keep = np.empty(n_pred, np.int64)
@@ -122,7 +123,7 @@ def _project_and_pair(cam_vec: np.ndarray, f: float, cx: float, cy: float, w: in
         n_in += 1
     n_obs = len(obs_xy)
     rad2 = radius * radius
-    crowd2 = 4.0 * rad2
+    crowd2 = crowd * crowd * rad2
     row_cnt = np.zeros(n_obs, np.int64)
     col_cnt = np.zeros(n_in, np.int64)
     row_last = np.full(n_obs, -1, np.int64)
@@ -150,6 +151,10 @@ def _project_and_pair(cam_vec: np.ndarray, f: float, cx: float, cy: float, w: in
     return out_obs[:n_out].copy(), out_pred[:n_out].copy(), n_in
 
 
+CROWD = 2.0
+"""No other candidate within this many match radii, on either side, for a pair to count."""
+
+
 @njit(cache=True, nogil=True)
 def _wahba_pairs(obs_vec: np.ndarray, star_vec: np.ndarray, o_idx: np.ndarray, c_idx: np.ndarray) -> np.ndarray:
     """Rotation ICRS -> body best mapping ``star_vec[c_idx]`` onto ``obs_vec[o_idx]``."""
@@ -169,7 +174,7 @@ def _wahba_pairs(obs_vec: np.ndarray, star_vec: np.ndarray, o_idx: np.ndarray, c
 @njit(cache=True, nogil=True)
 def _match_rig(r_body: np.ndarray, obs_xy: np.ndarray, star_vec: np.ndarray, near: np.ndarray,
                near_off: np.ndarray, mounts: np.ndarray, cams: np.ndarray, dist: np.ndarray, rows: np.ndarray,
-               row_off: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, float]:
+               row_off: np.ndarray, radius: float, crowd: float) -> tuple[np.ndarray, np.ndarray, float]:
     """Pairs (observed row, star row) in every camera under ``r_body``, and the fraction of
     the image area within ``radius`` of a predicted star."""
     n_total = len(rows)
@@ -188,7 +193,7 @@ def _match_rig(r_body: np.ndarray, obs_xy: np.ndarray, star_vec: np.ndarray, nea
                 cam_vec[j - lo, a] = r_cam[a, 0] * v[0] + r_cam[a, 1] * v[1] + r_cam[a, 2] * v[2]
         cam_rows = rows[row_off[c]:row_off[c + 1]]
         po, pc, n_in = _project_and_pair(cam_vec, cams[c, 0], cams[c, 1], cams[c, 2], int(cams[c, 3]),
-                                         int(cams[c, 4]), dist[c], obs_xy[cam_rows], radius)
+                                         int(cams[c, 4]), dist[c], obs_xy[cam_rows], radius, crowd)
         area += cams[c, 3] * cams[c, 4]
         covered += n_in * math.pi * radius * radius
         for k in range(len(po)):
@@ -212,7 +217,7 @@ def _refine(obs_vec: np.ndarray, obs_xy: np.ndarray, star_vec: np.ndarray, hyp_o
         if e2 > quick_tol * quick_tol:
             return False, hyp_obs[:0].copy(), hyp_cat[:0].copy(), 1.0, r0
     m_obs, m_cat, p_single = _match_rig(r0, obs_xy, star_vec, near, near_off, mounts, cams, dist, rows, row_off,
-                                        radius)
+                                        radius, CROWD)
     if len(m_obs) < max(len(hyp_obs), 3):
         return False, m_obs, m_cat, p_single, r0
     r = r0
@@ -220,7 +225,7 @@ def _refine(obs_vec: np.ndarray, obs_xy: np.ndarray, star_vec: np.ndarray, hyp_o
     for _ in range(max_refits):
         r = _wahba_pairs(obs_vec, star_vec, m_obs, m_cat)
         g_obs, g_cat, g_p = _match_rig(r, obs_xy, star_vec, near, near_off, mounts, cams, dist, rows, row_off,
-                                       radius)
+                                       radius, CROWD)
         if len(g_obs) <= len(m_obs):
             grew = False
             break

@@ -234,24 +234,32 @@ class Verifier:
         """Near-miss test of an attitude with ``n_pairs`` pairs at the match radius.
 
         A slightly rotated attitude (a false star or a wrong pair in the hypothesis pulls the
-        fit a few pixels off) matches only the stars near its pivot, and many more at three
-        match radii; a right one matches about as many at both. When the wide pairing grows by
-        more than ``max(3, n_pairs / 3)``, the attitude is refitted to the wide pairs and the
-        pairing redone at the match radius: the answer of that basin is returned if it pairs
-        more stars, else None (refused). ``(None,)`` means the attitude is settled.
+        fit a few to twenty pixels off) matches only the stars near its pivot, and many more at
+        a wider radius; a right one matches about as many. At ``SETTLE_FACTORS`` times the match
+        radius in turn (pairs alone within that radius: the usual twice-the-radius crowding rule
+        would remove most pairs of a dense field there): when the wide pairing grows by more
+        than ``max(3, n_pairs / 3)``, the attitude is refitted to the wide pairs and the pairing
+        redone at the match radius; that basin is kept if it pairs more stars (and tested at
+        the next factor), else the answer is refused (None). ``(None,)``: settled as it was.
         """
-        near, near_off = self._near(r)
         k = self.obs.kernel_arrays
-        w_obs, w_cat, _ = match_rig(r, self.obs.xy, self.db.stars.vec, near, near_off, k, 3 * self.match_radius_px)
-        if len(w_obs) <= n_pairs + max(3, n_pairs // 3):
-            return (None,)
-        r2 = wahba_svd(self.obs.vec[w_obs], self.db.stars.vec[w_cat])
-        ok, m_obs, m_cat, p_single, r2 = refine(
-            self.obs.vec, self.obs.xy, self.db.stars.vec, w_obs[:0], w_cat[:0], r2, 1.0, near, near_off, k,
-            self.match_radius_px, max_refits=4)
-        if not ok or len(m_obs) <= n_pairs:
-            return None
-        return m_obs, m_cat, p_single, r2
+        moved: tuple | None = None
+        for factor in SETTLE_FACTORS:
+            near, near_off = self._near(r)
+            w_obs, w_cat, _ = match_rig(r, self.obs.xy, self.db.stars.vec, near, near_off, k,
+                                        factor * self.match_radius_px, crowd=1.0)
+            if len(w_obs) <= n_pairs + max(3, n_pairs // 3):
+                continue
+            r2 = wahba_svd(self.obs.vec[w_obs], self.db.stars.vec[w_cat])
+            near, near_off = self._near(r2)
+            ok, m_obs, m_cat, p_single, r2 = refine(
+                self.obs.vec, self.obs.xy, self.db.stars.vec, w_obs[:0], w_cat[:0], r2, 1.0, near, near_off, k,
+                self.match_radius_px, max_refits=4)
+            if not ok or len(m_obs) <= n_pairs:
+                return None
+            moved = (m_obs, m_cat, p_single, r2)
+            r, n_pairs = r2, len(m_obs)
+        return (None,) if moved is None else moved
 
     def _match_all(self, r_body: FloatArray) -> tuple[IntArray, IntArray, float]:
         """Pair observed and predicted stars in every camera; also return the chance that a
@@ -281,6 +289,9 @@ class Verifier:
         self._near_cache = (np.array(r_body, dtype=np.float64), near, off)
         return near, off
 
+
+SETTLE_FACTORS = (3.0, 6.0)
+"""Wide radii (in match radii) at which an accepted attitude is tested for a near miss."""
 
 NEAR_MARGIN_DEG = 0.5
 """Catalogue stars are gathered this far beyond each image's half-diagonal."""

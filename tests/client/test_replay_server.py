@@ -192,7 +192,9 @@ def test_stream_resumes_after_a_restart_without_duplicates(own_server: ServerPro
         got += [r.id for r in stream.results()]
         restart.join()
         assert stream.reconnects >= 1
-        assert stream.frames_resent == 15  # only the unacknowledged ones
+        # only the unacknowledged ones: all 15 unless an answer reached the client before the
+        # kill (how many do depends on how fast the server solves; the stream reads them)
+        assert 1 <= stream.frames_resent <= 15
     assert got == [f.id for f in frames]  # each once, in order
 
 

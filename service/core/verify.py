@@ -208,9 +208,7 @@ class Verifier:
         if not ok:
             return None
         basin = self._settle(r, len(m_obs))
-        if basin is None:
-            return None
-        if basin[0] is not None:
+        if basin is not None:
             m_obs, m_cat, p_single, r = basin
         hyp = (m_obs[:, None] == obs_idx[None, :]).any(axis=1)
         n_extra = int(len(m_obs) - hyp.sum())
@@ -230,7 +228,7 @@ class Verifier:
             return None
         return found
 
-    def _settle(self, r: FloatArray, n_pairs: int) -> tuple | None:
+    def _settle(self, r: FloatArray, n_pairs: int) -> tuple[IntArray, IntArray, float, FloatArray] | None:
         """Near-miss test of an attitude with ``n_pairs`` pairs at the match radius.
 
         A slightly rotated attitude (a false star or a wrong pair in the hypothesis pulls the
@@ -239,11 +237,14 @@ class Verifier:
         radius in turn (pairs alone within that radius: the usual twice-the-radius crowding rule
         would remove most pairs of a dense field there): when the wide pairing grows by more
         than ``max(3, n_pairs / 3)``, the attitude is refitted to the wide pairs and the pairing
-        redone at the match radius; that basin is kept if it pairs more stars (and tested at
-        the next factor), else the answer is refused (None). ``(None,)``: settled as it was.
+        redone at the match radius; that basin replaces the answer if it pairs more stars (and
+        is tested at the next factor). In a dense real frame (hundreds of detections, many not
+        in the catalogue) the wide pairing also grows by chance; its refit then pairs fewer
+        stars and the answer stays. Returns the new basin ``(obs, cat, p, r)``, or None when
+        the attitude is settled as it was.
         """
         k = self.obs.kernel_arrays
-        moved: tuple | None = None
+        moved: tuple[IntArray, IntArray, float, FloatArray] | None = None
         for factor in SETTLE_FACTORS:
             near, near_off = self._near(r)
             w_obs, w_cat, _ = match_rig(r, self.obs.xy, self.db.stars.vec, near, near_off, k,
@@ -256,10 +257,10 @@ class Verifier:
                 self.obs.vec, self.obs.xy, self.db.stars.vec, w_obs[:0], w_cat[:0], r2, 1.0, near, near_off, k,
                 self.match_radius_px, max_refits=4)
             if not ok or len(m_obs) <= n_pairs:
-                return None
+                continue  # no better basin there: the wide pairs were mostly chance (a dense field)
             moved = (m_obs, m_cat, p_single, r2)
             r, n_pairs = r2, len(m_obs)
-        return (None,) if moved is None else moved
+        return moved
 
     def _match_all(self, r_body: FloatArray) -> tuple[IntArray, IntArray, float]:
         """Pair observed and predicted stars in every camera; also return the chance that a

@@ -30,8 +30,10 @@ RUN pip install --no-deps --no-cache-dir . && python -m compileall -q /opt/venv
 
 # The default navigation database, built once here from the bundled Hipparcos catalogue.
 ENV SKYFIX_DB_DIR=/opt/skyfix/db
+# Solving once per method also compiles numba's kernels into its cache beside the code
+# (service/core/__pycache__), which the runtime stage copies with the venv.
 RUN python -c "from service.core.navdb import ensure_default_database, open_database; \
-open_database(ensure_default_database())"
+from service.core.pipeline import warm_up; warm_up(open_database(ensure_default_database()))"
 
 # ---- runtime ---------------------------------------------------------------------------------
 FROM python:${PYTHON_VERSION}-slim AS runtime
@@ -44,7 +46,10 @@ ENV PATH=/opt/venv/bin:$PATH \
     SKYFIX_HOST=0.0.0.0 \
     SKYFIX_PORT=8000 \
     SKYFIX_DB_DIR=/opt/skyfix/db \
-    SKYFIX_DB_PATH=/opt/skyfix/db/default
+    SKYFIX_DB_PATH=/opt/skyfix/db/default \
+    NUMBA_CACHE_DIR=/tmp/numba-cache
+# (NUMBA_CACHE_DIR: where numba may write when the image's cache does not fit this CPU; the
+# venv is read-only for the skyfix user.)
 USER skyfix:skyfix
 WORKDIR /opt/skyfix
 EXPOSE 8000

@@ -30,8 +30,9 @@ RUN pip install --no-deps --no-cache-dir . && python -m compileall -q /opt/venv
 
 # The default navigation database, built once here from the bundled Hipparcos catalogue.
 ENV SKYFIX_DB_DIR=/opt/skyfix/db
-# Solving once per method also compiles numba's kernels into its cache beside the code
-# (service/core/__pycache__), which the runtime stage copies with the venv.
+# Solving once per method also compiles numba's kernels into NUMBA_CACHE_DIR, which the
+# runtime stage copies (numba reuses it when the CPU matches, else compiles in memory).
+ENV NUMBA_CACHE_DIR=/opt/skyfix/numba
 RUN python -c "from service.core.navdb import ensure_default_database, open_database; \
 from service.core.pipeline import warm_up; warm_up(open_database(ensure_default_database()))"
 
@@ -40,6 +41,7 @@ FROM python:${PYTHON_VERSION}-slim AS runtime
 RUN useradd --system --uid 10001 --user-group --no-create-home --shell /usr/sbin/nologin skyfix
 COPY --from=build /opt/venv /opt/venv
 COPY --from=build /opt/skyfix/db /opt/skyfix/db
+COPY --from=build /opt/skyfix/numba /opt/skyfix/numba
 ENV PATH=/opt/venv/bin:$PATH \
     PYTHONUNBUFFERED=1 \
     PYTHONDONTWRITEBYTECODE=1 \
@@ -47,9 +49,7 @@ ENV PATH=/opt/venv/bin:$PATH \
     SKYFIX_PORT=8000 \
     SKYFIX_DB_DIR=/opt/skyfix/db \
     SKYFIX_DB_PATH=/opt/skyfix/db/default \
-    NUMBA_CACHE_DIR=/tmp/numba-cache
-# (NUMBA_CACHE_DIR: where numba may write when the image's cache does not fit this CPU; the
-# venv is read-only for the skyfix user.)
+    NUMBA_CACHE_DIR=/opt/skyfix/numba
 USER skyfix:skyfix
 WORKDIR /opt/skyfix
 EXPOSE 8000

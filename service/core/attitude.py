@@ -162,11 +162,11 @@ def wahba_svd(obs: FloatArray, ref: FloatArray, weights: FloatArray | None = Non
     obs = np.ascontiguousarray(obs, dtype=np.float64).reshape(-1, 3)
     ref = np.ascontiguousarray(ref, dtype=np.float64).reshape(-1, 3)
     w = np.ones(len(obs)) if weights is None else np.ascontiguousarray(weights, dtype=np.float64)
-    return _wahba_kernel(obs, ref, w)
+    return wahba_kernel(obs, ref, w)
 
 
 @njit(cache=True, nogil=True)
-def _wahba_kernel(obs: np.ndarray, ref: np.ndarray, w: np.ndarray) -> np.ndarray:
+def wahba_kernel(obs: np.ndarray, ref: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Compiled body of :func:`wahba_svd` (a 3x3 SVD costs ~1 us here, ~10 us via numpy)."""
     b = np.zeros((3, 3))
     for i in range(len(obs)):

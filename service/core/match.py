@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from .attitude import wahba_kernel
 from .types import FloatArray, IntArray
 
 
@@ -158,17 +159,7 @@ CROWD = 2.0
 @njit(cache=True, nogil=True)
 def _wahba_pairs(obs_vec: np.ndarray, star_vec: np.ndarray, o_idx: np.ndarray, c_idx: np.ndarray) -> np.ndarray:
     """Rotation ICRS -> body best mapping ``star_vec[c_idx]`` onto ``obs_vec[o_idx]``."""
-    b = np.zeros((3, 3))
-    for i in range(len(o_idx)):
-        for a in range(3):
-            for c in range(3):
-                b[a, c] += obs_vec[o_idx[i], a] * star_vec[c_idx[i], c]
-    u, _, vt = np.linalg.svd(b)
-    r = u @ vt
-    if np.linalg.det(r) < 0:
-        u[:, 2] = -u[:, 2]
-        r = u @ vt
-    return r
+    return wahba_kernel(obs_vec[o_idx], star_vec[c_idx], np.ones(len(o_idx)))
 
 
 @njit(cache=True, nogil=True)

@@ -323,8 +323,7 @@ def _ensure_warm(db: NavDatabase | NavDatabaseSet) -> None:
     """:func:`warm_up` ``db`` once (the first solve on a freshly opened database would
     otherwise spend its time limit loading compiled kernels and building indexes)."""
     if not db.__dict__.get("_warm"):
-        db.__dict__["_warm"] = True
-        warm_up(db)
+        warm_up(db)  # marks ``db`` (and a set's members) warm before its own solves
 
 
 def warm_up(db: NavDatabase | NavDatabaseSet) -> None:

@@ -63,10 +63,14 @@ def _frame(a: np.ndarray, b: np.ndarray, c: np.ndarray, out: np.ndarray) -> floa
     out[0, 2] = t1y * t2z - t1z * t2y
     out[1, 2] = t1z * t2x - t1x * t2z
     out[2, 2] = t1x * t2y - t1y * t2x
-    bxc0 = b[1] * c[2] - b[2] * c[1]
-    bxc1 = b[2] * c[0] - b[0] * c[2]
-    bxc2 = b[0] * c[1] - b[1] * c[0]
-    return a[0] * bxc0 + a[1] * bxc1 + a[2] * bxc2
+    return triple_product(a, b, c)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def triple_product(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    """``a . (b x c)`` of 3-vectors: its sign is a triangle's handedness."""
+    return (a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2])
+            + a[2] * (b[0] * c[1] - b[1] * c[0]))
 
 
 @njit(cache=True, nogil=True)

@@ -343,16 +343,6 @@ def sky_grid(db: NavDatabase) -> SkyGrid:
     return cache["grid"]
 
 
-def batch_wahba(obs: FloatArray, ref: FloatArray) -> FloatArray:
-    """Rotations ``(K, 3, 3)`` best mapping ``ref[k]`` onto ``obs[k]`` (both ``(K, n, 3)``):
-    Wahba's problem by SVD, vectorised over K."""
-    b = np.einsum("kia,kib->kab", obs, ref)
-    u, _, vt = np.linalg.svd(b)
-    d = np.sign(np.linalg.det(u) * np.linalg.det(vt))
-    u[:, :, 2] *= d[:, None]
-    return u @ vt
-
-
 # ---- sparse fields: a uniquely matched triangle as its own proof ----------------------------
 # Appended for frames of 3-4 stars, which have no fourth star to confirm a triangle. It reads
 # the Verifier (``obs``, ``db``, ``match_radius_px``, ``max_false_prob``, ``_match_all``) and is

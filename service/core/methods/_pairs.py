@@ -91,6 +91,14 @@ class SharedPairs:
         return self.pairs[start:end], self.angles[start:end]
 
 
+def require_shared(shared: SharedPairs | None, method: str) -> SharedPairs:
+    """``shared``, or a clear error for a method that reads the shared pair table but was
+    built without one (outside ``navdb.build_database``)."""
+    if shared is None:
+        raise ValueError(f"{method} reads the shared pair table: build it with navdb.build_database")
+    return shared
+
+
 def build_shared_pairs(vec: FloatArray, limits: Iterable[PairLimits]) -> SharedPairs:
     """The pair table of stars ``vec`` ``(N, 3)`` covering every one of ``limits`` (the largest
     maximum and the smallest minimum separation)."""

@@ -32,6 +32,7 @@ from numba import njit
 from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
+from ..screen import triple_product
 from ..verify import Verified
 from ._pairs import build_pair_table, pattern_order
 from .base import Progress, SolveContext
@@ -156,25 +157,20 @@ class MaxAngleMatcher:
         return labels[first], sides[first], theta[first], tol[first]
 
     def query_many(self, sides: np.ndarray, theta: np.ndarray, tol: np.ndarray, eps: float,
-                   labels: np.ndarray | None = None, obs_vec: np.ndarray | None = None,
+                   labels: np.ndarray, obs_vec: np.ndarray,
                    max_per_triangle: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """Record rows matching each observed triangle; returns ``(rows, which)`` with
-        ``which`` the index of the observed triangle of each row (ascending).
-
-        With ``labels`` and ``obs_vec`` given, mirror images (opposite handedness) are dropped;
-        with ``max_per_triangle > 0``, so is every candidate of a triangle matching more than
-        that many catalogue triangles (it carries no information)."""
-        check_hand = labels is not None and obs_vec is not None
-        if not check_hand:
-            labels = np.zeros((len(theta), 3), np.int64)
-            obs_vec = np.zeros((1, 3))
+        """Record rows matching each observed triangle (vertices ``labels``, rows of the
+        observed vectors ``obs_vec``) with the same handedness; returns ``(rows, which)`` with
+        ``which`` the index of the observed triangle of each row (ascending). With
+        ``max_per_triangle > 0`` every candidate of a triangle matching more than that many
+        catalogue triangles is dropped (it carries no information)."""
         return _query(self.key, self.c, self.theta, self.ids, self.vec,
                       np.ascontiguousarray(obs_vec, dtype=np.float64),
                       np.ascontiguousarray(labels, dtype=np.int64),
                       np.ascontiguousarray(sides, dtype=np.float64),
                       np.ascontiguousarray(theta, dtype=np.float64),
                       np.ascontiguousarray(tol, dtype=np.float64),
-                      float(eps), self.n_blocks, self.b_scale, check_hand, int(max_per_triangle))
+                      float(eps), self.n_blocks, self.b_scale, int(max_per_triangle))
 
     def identify(self, ctx: SolveContext) -> Verified | None:
         obs = ctx.obs
@@ -224,8 +220,7 @@ def _chunks(total: int) -> list[int]:
 @njit(cache=True, nogil=True)
 def _query(key: np.ndarray, c_tab: np.ndarray, th_tab: np.ndarray, ids: np.ndarray, star_vec: np.ndarray,
            obs_vec: np.ndarray, labels: np.ndarray, sides: np.ndarray, theta: np.ndarray, tol: np.ndarray,
-           eps: float, n_blocks: int, b_scale: float, check_hand: bool,
-           max_per_triangle: int) -> tuple[np.ndarray, np.ndarray]:
+           eps: float, n_blocks: int, b_scale: float, max_per_triangle: int) -> tuple[np.ndarray, np.ndarray]:
     """Compiled query: the blocks covering ``theta +- tol``, the ``b +- eps`` slice of each
     (binary search on the composite key), then ``c``, ``theta`` and the longest side ``a``
     (from ``b``, ``c``, ``theta``) within tolerance, then handedness."""
@@ -237,9 +232,7 @@ def _query(key: np.ndarray, c_tab: np.ndarray, th_tab: np.ndarray, ids: np.ndarr
         first = n_out
         a_obs, b_obs, c_obs = sides[t, 0], sides[t, 1], sides[t, 2]
         th, tl = theta[t], tol[t]
-        h_obs = 0.0
-        if check_hand:
-            h_obs = _triple(obs_vec[labels[t, 0]], obs_vec[labels[t, 1]], obs_vec[labels[t, 2]])
+        h_obs = triple_product(obs_vec[labels[t, 0]], obs_vec[labels[t, 1]], obs_vec[labels[t, 2]])
         blk_lo = min(max(int(n_blocks * (th - tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
         blk_hi = min(max(int(n_blocks * (th + tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
         for blk in range(blk_lo, blk_hi + 1):
@@ -253,10 +246,9 @@ def _query(key: np.ndarray, c_tab: np.ndarray, th_tab: np.ndarray, ids: np.ndarr
                 a_rec = math.sqrt(max(b_rec * b_rec + c_rec * c_rec - 2 * b_rec * c_rec * math.cos(th_tab[r]), 0.0))
                 if abs(a_rec - a_obs) > eps:
                     continue
-                if check_hand:
-                    h_cat = _triple(star_vec[ids[r, 0]], star_vec[ids[r, 1]], star_vec[ids[r, 2]])
-                    if (h_cat > 0) != (h_obs > 0):
-                        continue
+                h_cat = triple_product(star_vec[ids[r, 0]], star_vec[ids[r, 1]], star_vec[ids[r, 2]])
+                if (h_cat > 0) != (h_obs > 0):
+                    continue
                 if n_out == cap:
                     cap *= 2
                     rows2 = np.empty(cap, np.int64)
@@ -270,13 +262,6 @@ def _query(key: np.ndarray, c_tab: np.ndarray, th_tab: np.ndarray, ids: np.ndarr
         if max_per_triangle > 0 and n_out - first > max_per_triangle:
             n_out = first
     return rows[:n_out].copy(), which[:n_out].copy()
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _triple(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
-    """``a . (b x c)``: its sign is a triangle's handedness."""
-    return (a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2])
-            + a[2] * (b[0] * c[1] - b[1] * c[0]))
 
 
 @njit(cache=True, nogil=True)

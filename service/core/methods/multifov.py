@@ -59,7 +59,15 @@ from ..navdb.reader import NavDatabase
 from ..types import FloatArray, IntArray
 from ..verify import Verified, star_tree
 from ._grow import screen_and_grow
-from ._pairs import PairLimits, SharedPairs, edge_keys, join_triangles, pair_limits, same_handedness
+from ._pairs import (
+    PairLimits,
+    SharedPairs,
+    edge_keys,
+    join_triangles,
+    pair_limits,
+    require_shared,
+    same_handedness,
+)
 from .base import Progress, SolveContext
 
 SEGMENT_DEG = 1.0
@@ -157,10 +165,8 @@ class MultiFov:
         *, shared: SharedPairs | None = None,
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Own arrays: the segment index over its rows of the shared pair table."""
-        if shared is None:
-            raise ValueError("multifov reads the shared pair table: build it with navdb.build_database")
         limits = self.pair_limits(config, params)
-        _, angles = shared.view(limits)
+        _, angles = require_shared(shared, self.name).view(limits)
         seg = SegmentIndex.build(angles, math.radians(SEGMENT_DEG))
         progress(f"{len(angles)} pairs", 1.0)
         tables: dict[str, np.ndarray] = {"seg_start": seg.start, "seg_coef": seg.coef, "seg_err": seg.err}

@@ -29,6 +29,7 @@ from ._pairs import (
     join_triangles,
     pair_limits,
     pattern_order,
+    require_shared,
     same_handedness,
 )
 from .base import Progress, SolveContext
@@ -50,10 +51,8 @@ class Pyramid:
         *, shared: SharedPairs | None = None,
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """No arrays of its own: the shared pair table's rows within its limits are all it reads."""
-        if shared is None:
-            raise ValueError("pyramid reads the shared pair table: build it with navdb.build_database")
         limits = self.pair_limits(config, params)
-        _, angles = shared.view(limits)
+        _, angles = require_shared(shared, self.name).view(limits)
         progress(f"{len(angles)} pairs", 1.0)
         return {}, {"max_angle_deg": limits.max_angle_deg, "n_pairs": int(len(angles))}
 

@@ -41,7 +41,15 @@ from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
 from ..verify import Verified, check_unique_triangle
-from ._pairs import PairLimits, SharedPairs, edge_keys, join_triangles, pair_limits, same_handedness
+from ._pairs import (
+    PairLimits,
+    SharedPairs,
+    edge_keys,
+    join_triangles,
+    pair_limits,
+    require_shared,
+    same_handedness,
+)
 from .base import Progress, SolveContext
 
 MAX_CANDIDATES = 64
@@ -91,13 +99,11 @@ class Triangle:
         *, shared: SharedPairs | None = None,
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Own arrays: the k-vector over its rows of the shared pair table (``index="kvector"``)."""
-        if shared is None:
-            raise ValueError("triangle reads the shared pair table: build it with navdb.build_database")
         limits = self.pair_limits(config, params)
         index = str(params.get("index", "searchsorted"))
         if index not in ("searchsorted", "kvector"):
             raise ValueError(f"triangle: unknown index {index!r}")
-        _, angles = shared.view(limits)
+        _, angles = require_shared(shared, self.name).view(limits)
         tables: dict[str, np.ndarray] = {}
         meta: dict[str, Any] = {"max_angle_deg": limits.max_angle_deg, "n_pairs": int(len(angles)),
                                 "index": index}

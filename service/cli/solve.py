@@ -20,12 +20,11 @@ def solve_frames(
     sigma: Annotated[float, typer.Option(help="Expected centroid error, px.")] = 1.0,
 ) -> None:
     """Print one JSON result per frame on stdout, then a summary on stderr."""
-    from ..core.camera import Camera
+    from ..core.batch import frame_from_record, solve_frame
     from ..core.errors import SkyfixError
     from ..core.evaluate import score
     from ..core.navdb import open_database
-    from ..core.pipeline import SolveOptions, solve, solve_rig
-    from ..core.types import Centroids
+    from ..core.pipeline import SolveOptions
 
     database = open_database(resolve_db(db))
     options = SolveOptions(centroid_sigma_px=sigma)
@@ -38,14 +37,7 @@ def solve_frames(
             n += 1
             try:
                 rec: dict[str, Any] = json.loads(line)
-                if rec.get("cameras"):
-                    rig = [(Centroids.from_list(c["centroids"], field_name=f"cameras[{i}].centroids"),
-                            Camera.from_spec(c["camera"], field=f"cameras[{i}].camera"),
-                            c["camera"].get("mounting_quaternion")) for i, c in enumerate(rec["cameras"])]
-                    sol = solve_rig(rig, database, method=method, options=options)
-                else:
-                    sol = solve(Centroids.from_list(rec.get("centroids", [])), Camera.from_spec(rec.get("camera") or {}),
-                                database, method=method, options=options)
+                sol = solve_frame(frame_from_record(rec), database, method=method, options=options)
             except (SkyfixError, ValueError, KeyError, TypeError) as exc:
                 err_console.print(f"[red]line {lineno}:[/red] {exc}")
                 raise typer.Exit(2) from None

@@ -1,0 +1,63 @@
+"""The batch path: recorded frames parsed once, solved on threads, same answers as one by one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from service.core.batch import Frame, frame_from_record, solve_frame, solve_many
+from service.core.camera import Camera
+from service.core.errors import InvalidInputError
+from service.core.navdb import NavDatabase
+from service.core.pipeline import solve
+from service.core.sim import SimConfig, simulate_frames
+
+from ..conftest import SEED000_CAMERA
+
+
+def _frames(n: int, seed: int) -> list[Frame]:
+    sims = simulate_frames(SEED000_CAMERA, n, SimConfig(centroid_noise_px=0.5, false_stars=1), rng=seed)
+    return [Frame(((sim.centroids, SEED000_CAMERA, None),), id=i) for i, sim in enumerate(sims)]
+
+
+def test_solve_many_equals_one_by_one_on_threads(seed000_db: NavDatabase) -> None:
+    frames = _frames(24, 5)
+    one_by_one = [solve_frame(f, seed000_db) for f in frames]
+    batched = solve_many(frames, seed000_db, workers=2)
+    assert sum(s.solved for s in one_by_one) >= 20
+    for a, b in zip(one_by_one, batched, strict=True):
+        assert a.status == b.status
+        assert [s.hip for s in a.stars] == [s.hip for s in b.stars]
+        if a.solved:
+            assert np.allclose(a.quaternion, b.quaternion, atol=1e-12)
+
+
+def test_frame_from_record_single_camera_and_rig() -> None:
+    single = frame_from_record({"id": 3, "camera": {"width": 1024, "height": 1024, "fov_deg": 8.0},
+                                "centroids": [[1, 2, 3], [4, 5, 6]], "truth": {"hip": [1, 2]}})
+    assert single.id == 3 and not single.is_rig and len(single.views[0][0]) == 2
+    assert isinstance(single.views[0][1], Camera) and single.truth == {"hip": [1, 2]}
+    rig = frame_from_record({"cameras": [
+        {"camera": {"width": 100, "height": 100, "fov_deg": 5, "mounting_quaternion": [1, 0, 0, 0]},
+         "centroids": [[1, 2]]},
+        {"camera": {"width": 100, "height": 100, "fov_deg": 5}, "centroids": []}]})
+    assert rig.is_rig and len(rig.views) == 2
+
+
+@pytest.mark.parametrize(("record", "field"), [
+    ({"centroids": [[1, 2]]}, "camera"),
+    ({"camera": {"width": 10, "height": 10, "fov_deg": 5}, "centroids": [[1, 2, 3, 4]]}, "centroids"),
+    ({"cameras": [{"centroids": []}]}, "cameras[0].camera"),
+    ([1, 2], "frame"),
+])
+def test_frame_from_record_names_the_field(record: object, field: str) -> None:
+    with pytest.raises(InvalidInputError) as err:
+        frame_from_record(record)  # type: ignore[arg-type]
+    assert err.value.field == field
+
+
+def test_solve_frame_matches_solve(seed000_db: NavDatabase) -> None:
+    frame = _frames(1, 9)[0]
+    cents, cam, _ = frame.views[0]
+    a, b = solve_frame(frame, seed000_db), solve(cents, cam, seed000_db)
+    assert a.status == b.status and [s.hip for s in a.stars] == [s.hip for s in b.stars]

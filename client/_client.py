@@ -156,6 +156,7 @@ class _BaseClient:
         method: str = "auto",
         attitude_hint: AttitudeHint | Mapping[str, Any] | None = None,
         epoch: float | None = None,
+        observer_velocity_km_s: Sequence[float] | None = None,
     ) -> SolveRequest:
         """Validate the arguments of a solve into a `SolveRequest` (raises on misuse)."""
         if isinstance(centroids, SolveRequest):
@@ -168,6 +169,7 @@ class _BaseClient:
             "method": method,
             "attitude_hint": attitude_hint,
             "epoch": epoch,
+            "observer_velocity_km_s": list(observer_velocity_km_s) if observer_velocity_km_s is not None else None,
         })
 
     def _solve_spec(self, request: SolveRequest) -> _RequestSpec:
@@ -305,6 +307,7 @@ class Client(_BaseClient):
         method: str = "auto",
         attitude_hint: AttitudeHint | Mapping[str, Any] | None = None,
         epoch: float | None = None,
+        observer_velocity_km_s: Sequence[float] | None = None,
     ) -> SolveResult:
         """Identify stars from centroids (``POST /v1/solve``).
 
@@ -315,7 +318,8 @@ class Client(_BaseClient):
         Raises `SkyfixHTTPError` when the server refuses the request.
         """
         request = self.build_solve_request(centroids, camera, cameras=cameras, id=id, method=method,
-                                           attitude_hint=attitude_hint, epoch=epoch)
+                                           attitude_hint=attitude_hint, epoch=epoch,
+                                           observer_velocity_km_s=observer_velocity_km_s)
         return self._parse(self._send(self._solve_spec(request)), SolveResult)
 
     def solve_image(self, image: ImageLike, *, camera: CameraLike | None = None, fov_deg: float | None = None,
@@ -411,10 +415,12 @@ class AsyncClient(_BaseClient):
         method: str = "auto",
         attitude_hint: AttitudeHint | Mapping[str, Any] | None = None,
         epoch: float | None = None,
+        observer_velocity_km_s: Sequence[float] | None = None,
     ) -> SolveResult:
         """As `Client.solve`."""
         request = self.build_solve_request(centroids, camera, cameras=cameras, id=id, method=method,
-                                           attitude_hint=attitude_hint, epoch=epoch)
+                                           attitude_hint=attitude_hint, epoch=epoch,
+                                           observer_velocity_km_s=observer_velocity_km_s)
         return self._parse(await self._send(self._solve_spec(request)), SolveResult)
 
     async def solve_image(self, image: ImageLike, *, camera: CameraLike | None = None,

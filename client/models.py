@@ -83,6 +83,10 @@ class AttitudeHint(_Model):
     radius_deg: float = Field(5.0, gt=0, le=180, description="How far the boresight may be from the hint.")
 
 
+VelocityKmS = Annotated[float, Field(ge=-1000, le=1000, allow_inf_nan=False)]
+"""One component of an observer velocity, km/s."""
+
+
 class SolveRequest(_Model):
     """Centroids in, identification out. Single camera: ``camera`` + ``centroids``; a rig:
     ``cameras`` (one centroid list per camera)."""
@@ -106,8 +110,16 @@ class SolveRequest(_Model):
     )
     epoch: float | None = Field(
         None, ge=1900, le=2200,
-        description="Decimal year of the observation. Accepted and range-checked; positions are those of "
-        "the database's epoch (/v1/info), which is within a year of any current observation.",
+        description="Decimal year of the observation (TDB). The identified stars are moved by their proper "
+        "motions from the database's epoch (/v1/info) to this one before the attitude is fitted; the stars' "
+        "ra_deg/dec_deg are then at this epoch. None: the database's epoch.",
+    )
+    observer_velocity_km_s: list[VelocityKmS] | None = Field(
+        None, min_length=3, max_length=3,
+        description="The observer's velocity relative to the solar-system barycentre, [vx, vy, vz] in ICRS "
+        "axes, km/s (the Earth's orbital ~30 km/s plus the spacecraft's). Stellar aberration (up to ~20 "
+        "arcsec) is applied to the catalogue directions before the attitude is fitted, so the quaternion is "
+        "the camera's true inertial attitude. Each component within +-1000 km/s.",
     )
     centroid_sigma_px: float | None = Field(
         None, gt=0, le=20,

@@ -108,6 +108,10 @@ def frame_call(req: SolveRequest, db: NavDb, named: Mapping[str, CameraEntry], *
     prior = hint(req.attitude_hint) or track_hint
     if req.centroid_sigma_px is not None:
         options = replace(options, centroid_sigma_px=req.centroid_sigma_px)
+    if req.epoch is not None or req.observer_velocity_km_s is not None:
+        velocity = req.observer_velocity_km_s
+        options = replace(options, epoch=req.epoch,
+                          observer_velocity_km_s=None if velocity is None else tuple(velocity))
     if req.cameras is None:
         assert req.camera is not None and req.centroids is not None
         cam = resolve_camera(req.camera, "camera", named)

@@ -57,6 +57,9 @@ class StarTable:
     mag: np.ndarray
     blends: dict[int, tuple[int, ...]] | None = None
     """For merged stars: HIP kept -> every HIP merged into it (simulator truth)."""
+    pm: np.ndarray | None = None
+    """(N, 2) float32 proper motions ``(mu_alpha*, mu_delta)``, mas/yr (a blend takes its
+    brightest star's); None for tables read from databases older than schema 3."""
 
     def __len__(self) -> int:
         return int(self.hip.shape[0])
@@ -154,7 +157,19 @@ def select_stars(
         brighter_count = np.bincount(fainter, minlength=len(hip))
         sel = brighter_count < density_cap
         vec, mag, hip = vec[sel], mag[sel], hip[sel]
-    return StarTable(hip.astype(np.int32), np.ascontiguousarray(vec), mag.astype(np.float32), blends)
+    return StarTable(hip.astype(np.int32), np.ascontiguousarray(vec), mag.astype(np.float32), blends,
+                     pm=proper_motions(cat, hip))
+
+
+def proper_motions(cat: RawCatalog, hip: IntArray) -> FloatArray:
+    """``(N, 2)`` float32 proper motions ``(mu_alpha*, mu_delta)`` in mas/yr of the stars with
+    Hipparcos numbers ``hip`` (NaN in the catalogue reads as 0)."""
+    order = np.argsort(cat.hip, kind="stable")
+    rows = order[np.searchsorted(cat.hip, hip, sorter=order)]
+    if len(hip) and not np.array_equal(cat.hip[rows], hip):
+        raise ValueError("HIP numbers not in the catalogue")
+    pm = np.stack([cat.pmra_mas_yr[rows], cat.pmdec_mas_yr[rows]], axis=1)
+    return np.nan_to_num(pm).astype(np.float32)
 
 
 def _merge_doubles(

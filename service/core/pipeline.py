@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .apparent import aberrate, apparent_directions
 from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
 from .camera import Camera
 from .errors import InvalidInputError
@@ -43,6 +44,13 @@ class SolveOptions:
         Brightest stars a method may combine into patterns.
     timeout_ms : float
         Give up after this long.
+    epoch : float, optional
+        Decimal year of the frame. The matched stars are moved by proper motion from the
+        database's epoch to this one before the final attitude fit (None: the database's).
+    observer_velocity_km_s : (3,), optional
+        The observer's velocity relative to the solar-system barycentre, ICRS axes, km/s. The
+        matched stars' directions are aberrated by it before the final fit, so the quaternion
+        is the camera's true inertial attitude (None: no aberration applied).
     retry_sigma_factor : float
         If nothing is proven, search once more assuming ``centroid_sigma_px`` times this (real
         faint stars are often worse than assumed); the hypotheses of the first pass still count
@@ -56,6 +64,8 @@ class SolveOptions:
     max_stars: int = 8
     timeout_ms: float = 500.0
     retry_sigma_factor: float = 1.0
+    epoch: float | None = None
+    observer_velocity_km_s: tuple[float, float, float] | None = None
 
 
 DEFAULT_OPTIONS = SolveOptions()
@@ -147,7 +157,7 @@ def solve_rig(
         refined = _refine(obs, db, deepest, found, sigma, options)
         if refined is not None:
             db, found = deepest, refined
-    sol = _solution(obs, db, found, used, sigma * obs.pixel_scale_rad)
+    sol = _solution(obs, db, found, used, sigma * obs.pixel_scale_rad, options)
     timings["attitude"] = (time.perf_counter() - t2) * 1e3
     timings["total"] = (time.perf_counter() - t0) * 1e3
     object.__setattr__(sol, "timings_ms", timings)
@@ -232,9 +242,22 @@ def _near_hint(r: np.ndarray, hint: tuple[Quaternion, float]) -> bool:
     return math.degrees(math.acos(cosang)) <= radius_deg
 
 
-def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_rad: float) -> Solution:
-    ref = np.asarray(db.stars.vec[v.cat])
-    fit = estimate(obs.vec[v.obs], ref, sigma_rad=None, matrix=v.matrix)
+def _apparent(db: NavDatabase, cat: np.ndarray, options: SolveOptions) -> tuple[np.ndarray, np.ndarray]:
+    """Directions of catalogue rows ``cat``: astrometric at the frame's epoch (reported per
+    star) and apparent (also aberrated; what the attitude is fitted to)."""
+    ref = np.asarray(db.stars.vec[cat])
+    dt = 0.0 if options.epoch is None else options.epoch - db.epoch
+    if dt != 0.0 and db.stars.pm is not None:
+        ref = apparent_directions(ref, pm_mas_yr=np.asarray(db.stars.pm[cat]), dt_years=dt)
+    seen = ref if options.observer_velocity_km_s is None else aberrate(ref, np.asarray(options.observer_velocity_km_s))
+    return ref, seen
+
+
+def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_rad: float,
+              options: SolveOptions = DEFAULT_OPTIONS) -> Solution:
+    ref, seen = _apparent(db, v.cat, options)
+    moved = options.epoch is not None or options.observer_velocity_km_s is not None
+    fit = estimate(obs.vec[v.obs], seen, sigma_rad=None, matrix=None if moved else v.matrix)
     ra, dec, roll = radec_roll(fit.matrix)
     order = np.lexsort((obs.index[v.obs], obs.camera[v.obs]))
     ref = ref[order]

@@ -182,7 +182,9 @@ def _write_member(directory: Path, config: BuildConfig, progress: Progress) -> d
         density_radius_deg=config.density_radius_deg,
     )
     arrays_meta: dict[str, Any] = {}
-    for name, arr in (("stars/hip", stars.hip), ("stars/vec", stars.vec), ("stars/mag", stars.mag)):
+    assert stars.pm is not None
+    for name, arr in (("stars/hip", stars.hip), ("stars/vec", stars.vec), ("stars/mag", stars.mag),
+                      ("stars/pm", stars.pm)):
         arrays_meta[name] = _write_array(directory, name, arr)
     progress(f"{len(stars)} navigation stars selected", 0.1)
 

@@ -23,14 +23,16 @@ from pathlib import Path
 
 FORMAT_NAME = "skyfix-navdb"
 SET_FORMAT_NAME = "skyfix-navdb-set"
-SCHEMA_VERSION = 2
-"""2: the star-pair table is one shared group (``pairs/``) instead of one copy per method."""
+SCHEMA_VERSION = 3
+"""2: the star-pair table is one shared group (``pairs/``) instead of one copy per method.
+3: ``stars/pm``, the proper motions, so a frame's epoch can be applied per request."""
 MANIFEST = "manifest.json"
 
 STAR_ARRAYS = {
     "stars/hip": "<i4",  # (N,) Hipparcos number, rows brightest first
     "stars/vec": "<f8",  # (N, 3) ICRS unit vectors at the database epoch
     "stars/mag": "<f4",  # (N,) approximate Johnson V
+    "stars/pm": "<f4",  # (N, 2) proper motion (mu_alpha*, mu_delta), mas/yr
 }
 
 PAIR_ARRAYS = {

@@ -188,7 +188,7 @@ def open_database(path: str | os.PathLike[str], *, verify_hashes: bool = False) 
         arrays[name] = _open_array(p, name, spec)
         if verify_hashes and sha256_file(p / spec["file"]) != spec["sha256"]:
             raise DatabaseCorruptError(f"{p / spec['file']}: sha256 does not match the manifest")
-    stars = StarTable(arrays["stars/hip"], arrays["stars/vec"], arrays["stars/mag"])
+    stars = StarTable(arrays["stars/hip"], arrays["stars/vec"], arrays["stars/mag"], pm=arrays["stars/pm"])
     tables: dict[str, dict[str, np.ndarray]] = {m: {} for m in manifest.get("methods", {})}
     shared: dict[str, dict[str, np.ndarray]] = {}
     for name, arr in arrays.items():

@@ -135,3 +135,19 @@ def test_centroid_sigma_widens_the_search(client: httpx.Client, frames: list[Sim
     check_hips(result, frame)
     bad = client.post("/v1/solve", json={**body, "centroid_sigma_px": 0})
     assert bad.status_code == 422 and bad.json()["field"] == "centroid_sigma_px"
+
+
+def test_observer_velocity_is_applied_and_checked(client: httpx.Client, frames: list[SimFrame]) -> None:
+    """``observer_velocity_km_s`` turns the fitted attitude by the aberration (~20" at 30 km/s);
+    a wrong length or an absurd speed is a 422 naming the field."""
+    frame = solvable(frames, 1)[0]
+    body: dict[str, Any] = {"camera": "tetra3", "centroids": rows(frame)}
+    plain = client.post("/v1/solve", json=body).json()
+    moved = client.post("/v1/solve", json={**body, "epoch": 2026.5, "observer_velocity_km_s": [0.0, 30.0, 0.0]})
+    assert moved.status_code == 200 and moved.json()["status"] == "solved", moved.text
+    shift_arcsec = angle_deg(moved.json()["quaternion"], np.asarray(plain["quaternion"])) * 3600
+    assert 1.0 < shift_arcsec < 40.0
+    for bad in ([1.0, 2.0], [1.0, 2.0, 3.0, 4.0], [0.0, 5000.0, 0.0], ["x", 0, 0]):
+        r = client.post("/v1/solve", json={**body, "observer_velocity_km_s": bad})
+        assert r.status_code == 422, (bad, r.text)
+        assert "observer_velocity_km_s" in r.text

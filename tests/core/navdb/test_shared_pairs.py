@@ -114,7 +114,7 @@ def test_old_schema_is_refused_naming_the_rebuild(tmp_path: Path) -> None:
     cfg = BuildConfig(fov_max_deg=10.0, fov_min_deg=8.0, mag_limit=5.0, epoch=2026.0, methods=("pyramid",))
     path = build_database(tmp_path / "old", cfg)
     _set_schema(path, 1)
-    with pytest.raises(DatabaseCorruptError, match=r"schema version 1, this skyfix reads 2; rebuild"):
+    with pytest.raises(DatabaseCorruptError, match=rf"schema version 1, this skyfix reads {SCHEMA_VERSION}; rebuild"):
         open_database(path)
 
 

@@ -138,7 +138,9 @@ def _fit_stats(obs: np.ndarray, ref: np.ndarray, r: np.ndarray,
     rms = math.sqrt(ss / n) if n else np.nan
     sig = sigma_rad
     if sig < 0:
-        sig = max(rms / ARCSEC_PER_RAD * math.sqrt(n / max(n - 3, 1)), 1e-7) if n else 1e-7
+        # per-axis error from the residuals: each star gives 2 tangent-plane components, the fit
+        # takes 3 degrees of freedom, so E[sum |res|^2] = (2n - 3) sigma^2
+        sig = max(math.sqrt(ss / max(2 * n - 3, 1)) / ARCSEC_PER_RAD, 1e-7) if n else 1e-7
     sd = np.full(3, np.inf)
     if abs(np.linalg.det(info)) > 1e-12:
         cov = np.linalg.inv(info) * sig * sig
@@ -217,17 +219,32 @@ class AttitudeEstimate:
     sigma_arcsec: tuple[float, float, float]
 
 
+PRIOR_DOF = 8.0
+"""Weight of the declared centroid error in the attitude sigma, as degrees of freedom (two
+stars' worth of residual components, four stars'); measured by ``python -m bench.bench_sigma``."""
+
+
 def estimate(
-    obs: FloatArray, ref: FloatArray, *, sigma_rad: float | None = None, matrix: FloatArray | None = None
+    obs: FloatArray, ref: FloatArray, *, sigma_rad: float | None = None, matrix: FloatArray | None = None,
+    prior_sigma_rad: float | None = None, prior_dof: float = PRIOR_DOF,
 ) -> AttitudeEstimate:
     """Attitude from matched pairs, with residuals and the covariance-derived 1-sigma errors
     about the camera's x, y (cross-boresight) and z (roll) axes.
 
-    ``sigma_rad`` is the per-star measurement error; by default the fit's own RMS residual.
-    ``matrix`` is the least-squares fit to these pairs when the caller already has it.
+    ``sigma_rad`` is the per-star, per-axis measurement error; by default it is estimated from
+    the fit's residuals (``sum |res|^2 / (2n - 3)``). ``prior_sigma_rad`` (the declared centroid
+    error) then joins that estimate as ``prior_dof`` extra degrees of freedom, which keeps
+    frames of few stars from an over-confident sigma. ``matrix`` is the least-squares fit to
+    these pairs when the caller already has it.
     """
     r = wahba_svd(obs, ref) if matrix is None else np.asarray(matrix, dtype=np.float64)
     res, rms, sd = _fit_stats(np.ascontiguousarray(obs, dtype=np.float64), np.ascontiguousarray(ref, dtype=np.float64),
                               np.ascontiguousarray(r), -1.0 if sigma_rad is None else float(sigma_rad))
+    if sigma_rad is None and prior_sigma_rad is not None and prior_dof > 0 and len(res):
+        ss = float(res @ res) / ARCSEC_PER_RAD**2
+        dof = max(2 * len(res) - 3, 1)
+        from_residuals = max(math.sqrt(ss / dof), 1e-7)
+        pooled = math.sqrt((ss + prior_dof * prior_sigma_rad**2) / (dof + prior_dof))
+        sd = sd * (pooled / from_residuals)
     sd = (float(sd[0]), float(sd[1]), float(sd[2]))
     return AttitudeEstimate(r, matrix_to_quat(r), res, float(rms), sd)  # type: ignore[arg-type]

@@ -257,7 +257,7 @@ def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma
               options: SolveOptions = DEFAULT_OPTIONS) -> Solution:
     ref, seen = _apparent(db, v.cat, options)
     moved = options.epoch is not None or options.observer_velocity_km_s is not None
-    fit = estimate(obs.vec[v.obs], seen, sigma_rad=None, matrix=None if moved else v.matrix)
+    fit = estimate(obs.vec[v.obs], seen, matrix=None if moved else v.matrix, prior_sigma_rad=sigma_rad)
     ra, dec, roll = radec_roll(fit.matrix)
     order = np.lexsort((obs.index[v.obs], obs.camera[v.obs]))
     ref = ref[order]

@@ -6,6 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from service.core.attitude import (
+    ARCSEC_PER_RAD,
     estimate,
     matrix_from_radec_roll,
     matrix_to_quat,
@@ -102,3 +103,29 @@ def test_estimate_reports_residuals_and_sigma(rng: np.random.Generator) -> None:
     px_arcsec = math.degrees(1 / cam.f_px) * 3600
     assert fit.rms_arcsec == pytest.approx(px_arcsec * math.sqrt(2), rel=0.35)
     assert fit.sigma_arcsec[2] > fit.sigma_arcsec[0]  # roll is the weak axis
+
+
+@pytest.mark.parametrize("prior", [False, True])
+def test_reported_sigma_predicts_the_error(prior: bool) -> None:
+    """Monte Carlo: 12 stars in a 10-deg field, 20" per-axis noise; the error about each
+    camera axis divided by the reported 1-sigma has a standard deviation of 1 (within 10%),
+    from the residuals alone and pooled with the declared noise."""
+    rng = np.random.default_rng(42)
+    sigma = 20.0 / ARCSEC_PER_RAD
+    ratios = []
+    for _ in range(1500):
+        xy = rng.uniform(-0.087, 0.087, size=(12, 2))
+        ref = np.column_stack([xy, np.ones(12)])
+        ref /= np.linalg.norm(ref, axis=1)[:, None]
+        east = np.cross([0.0, 1.0, 0.0], ref)
+        east /= np.linalg.norm(east, axis=1)[:, None]
+        north = np.cross(ref, east)
+        noise = rng.normal(0, sigma, size=(12, 2))
+        obs = ref + noise[:, :1] * east + noise[:, 1:] * north
+        obs /= np.linalg.norm(obs, axis=1)[:, None]
+        fit = estimate(obs, ref, prior_sigma_rad=sigma if prior else None)
+        e = fit.matrix  # truth is the identity: the error rotation is the fit itself
+        err = np.array([e[2, 1] - e[1, 2], e[0, 2] - e[2, 0], e[1, 0] - e[0, 1]]) / 2 * ARCSEC_PER_RAD
+        ratios.append(err / np.asarray(fit.sigma_arcsec))
+    std = np.std(ratios, axis=0)
+    assert np.all((std > 0.9) & (std < 1.1)), std

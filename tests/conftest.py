@@ -30,6 +30,15 @@ def seed000_db(tmp_path_factory: pytest.TempPathFactory) -> NavDatabase:
     return open_database(path)
 
 
+@pytest.fixture(scope="session")
+def default_set_db(tmp_path_factory: pytest.TempPathFactory):
+    """The default database set's members, built once per test session into a temp dir."""
+    from service.core.navdb import build_database_set
+    from service.core.navdb.default import DEFAULT_MEMBERS
+
+    return open_database(build_database_set(tmp_path_factory.mktemp("dbset") / "default", DEFAULT_MEMBERS))
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20261122)

@@ -1,4 +1,4 @@
-"""The ``skyfix`` command: serve, db, solve, solve-image, sim, replay."""
+"""The ``skyfix`` command: serve, db, solve, solve-image, sim, replay, calibrate."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import typer
 from client.cli import replay
 
 from . import db
+from .calibrate import calibrate_camera
 from .serve import serve
 from .sim import sim
 from .solve import solve_frames
@@ -20,6 +21,7 @@ app.command("solve")(solve_frames)
 app.command("sim")(sim)
 app.command("solve-image")(solve_image_files)
 app.command("replay")(replay)
+app.command("calibrate")(calibrate_camera)
 
 
 def main() -> None:

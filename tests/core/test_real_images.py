@@ -16,8 +16,6 @@ import pytest
 from service.core.camera import Camera
 from service.core.centroid import load_image
 from service.core.evaluate import attitude_error
-from service.core.navdb import build_database_set, open_database
-from service.core.navdb.default import DEFAULT_MEMBERS
 from service.core.pipeline import SolveOptions, solve, solve_image
 from service.core.types import Centroids
 from tests.conftest import ROOT
@@ -36,8 +34,8 @@ def _truth() -> dict:
 
 
 @pytest.fixture(scope="module")
-def default_set(tmp_path_factory: pytest.TempPathFactory):
-    return open_database(build_database_set(tmp_path_factory.mktemp("dbset") / "default", DEFAULT_MEMBERS))
+def default_set(default_set_db):
+    return default_set_db
 
 
 def _camera(t: dict) -> Camera:

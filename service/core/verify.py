@@ -210,6 +210,8 @@ class Verifier:
         basin = self._settle(r, len(m_obs))
         if basin is not None:
             m_obs, m_cat, p_single, r = basin
+        if len(self.obs.cameras) > 1:
+            m_obs, m_cat, r = self._drop_unverifiable(m_obs, m_cat, r, obs_idx)
         hyp = (m_obs[:, None] == obs_idx[None, :]).any(axis=1)
         n_extra = int(len(m_obs) - hyp.sum())
         n_free = len(obs) - len(obs_idx)
@@ -261,6 +263,49 @@ class Verifier:
             moved = (m_obs, m_cat, p_single, r2)
             r, n_pairs = r2, len(m_obs)
         return moved
+
+    def _drop_unverifiable(self, m_obs: IntArray, m_cat: IntArray, r: FloatArray, hyp_obs: IntArray
+                           ) -> tuple[IntArray, IntArray, FloatArray]:
+        """Rigs: drop the pairs of a camera that holds only one or two of them when the other
+        cameras cannot predict where its stars are.
+
+        The attitude from one narrow camera is loose in roll, which swings a second camera's
+        predictions by many pixels; a star there lands within the match radius of a catalogue
+        neighbour, its pair turns the roll to fit, and the refit leaves a small residual on a
+        wrong star. So each such pair must be unambiguous within the other cameras' prediction
+        error: the match radius plus 3 sigma of the predicted position (from the information
+        matrix of the other cameras' pairs, at half the match radius per axis). Pairs with
+        another catalogue star in that disc are dropped, and the attitude refitted without them.
+        """
+        obs = self.obs
+        cams = obs.camera[m_obs]
+        radius_rad = self.match_radius_px * obs.pixel_scale_rad
+        keep = np.ones(len(m_obs), dtype=bool)
+        tree = star_tree(self.db)
+        for c in np.unique(cams):
+            mine = cams == c
+            if mine.sum() > 2 or (~mine).sum() < 2 or np.isin(hyp_obs, m_obs[mine]).any():
+                continue
+            others = obs.vec[m_obs[~mine]]
+            info = len(others) * np.eye(3) - others.T @ others
+            try:
+                cov = np.linalg.inv(info) * (radius_rad / 2) ** 2
+            except np.linalg.LinAlgError:
+                keep[mine] = False
+                continue
+            r_wo = wahba_svd(others, self.db.stars.vec[m_cat[~mine]])
+            for i in np.flatnonzero(mine):
+                u = obs.vec[m_obs[i]]
+                ux = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+                spread = math.sqrt(max(float(np.linalg.eigvalsh(ux @ cov @ ux.T)[-1]), 0.0))
+                disc = radius_rad + 3 * spread
+                cands = tree.query_ball_point(r_wo.T @ u, 2 * math.sin(disc / 2))
+                if len(cands) != 1 or cands[0] != m_cat[i]:
+                    keep[mine] = False
+        if keep.all():
+            return m_obs, m_cat, r
+        m_obs, m_cat = m_obs[keep], m_cat[keep]
+        return m_obs, m_cat, wahba_svd(obs.vec[m_obs], self.db.stars.vec[m_cat])
 
     def _match_all(self, r_body: FloatArray) -> tuple[IntArray, IntArray, float]:
         """Pair observed and predicted stars in every camera; also return the chance that a

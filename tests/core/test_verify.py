@@ -128,3 +128,22 @@ def test_compiled_pairing_matches_the_plain_rule(seed000_db, frame) -> None:
     assert np.array_equal(np.sort(m_obs), want_obs)
     assert np.array_equal(m_cat[np.argsort(m_obs)], cand[single.argmax(axis=1)[want_obs]])
     assert p == pytest.approx(len(cand) * np.pi * rad * rad / (1024 * 1024))
+
+
+def test_rig_camera_with_one_star_is_not_paired_by_a_loose_roll(default_set_db) -> None:
+    """Replayed from ``python -m bench.bench_rig --frames 400`` (seed 1, frame 350): eight stars
+    in one camera leave the roll loose by ~6'; the other camera, 70 deg away, then paired its
+    brightest star with HIP 68891 instead of 68895 (the pair turned the roll to fit), a wrong
+    answer. The other camera's prediction error now makes that pair ambiguous, so it is dropped."""
+    from service.core.evaluate import score
+    from service.core.pipeline import SolveOptions, solve_rig
+    from service.core.sim import SimConfig
+    from service.core.sim_rig import gf7_rig, simulate_rig_frames
+
+    rig = gf7_rig()
+    frame = simulate_rig_frames(rig, 400, SimConfig(mag_limit=5.5, centroid_noise_px=0.5), rng=1)[350]
+    assert [int((f.hip >= 0).sum()) for f in frame.frames] == [4, 8]
+    sol = solve_rig(frame.inputs(rig), default_set_db, options=SolveOptions(centroid_sigma_px=0.5))
+    assert sol.solved
+    assert 68891 not in [s.hip for s in sol.stars]
+    assert score(sol, frame.frames[0].quaternion, frame.frames[0].hip.tolist(), camera=0).correct

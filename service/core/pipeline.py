@@ -21,8 +21,9 @@ from .camera import Camera
 from .errors import InvalidInputError
 from .methods import SolveContext, get_matcher, resolve
 from .navdb.reader import NavDatabase, NavDatabaseSet
+from .photometry import FAINT_GATE_MAG, beyond_completeness, too_bright
 from .types import Centroids, Solution, SolveStatus, StarMatch
-from .verify import Observation, Verified, Verifier
+from .verify import Observation, Verified, Verifier, star_tree
 
 Quaternion = Sequence[float]
 
@@ -232,6 +233,7 @@ def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: 
         np.concatenate(cams)[order].astype(np.int64),
         tuple(f[1] for f in frames),
         tuple(mountings),
+        flux=flux[order],
     )
 
 
@@ -253,10 +255,41 @@ def _apparent(db: NavDatabase, cat: np.ndarray, options: SolveOptions) -> tuple[
     return ref, seen
 
 
+def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified) -> np.ndarray:
+    """Pairs whose observed star is far brighter than its catalogue star, or whose catalogue
+    star is fainter than the frame's completeness (see :mod:`service.core.photometry`)."""
+    pair_mag = np.asarray(db.stars.mag[v.cat], dtype=np.float64)
+    bad = np.zeros(len(v.obs), dtype=bool)
+    if obs.flux is not None:
+        bad |= too_bright(obs.flux[v.obs], pair_mag)
+    if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
+        field = _stars_in_field(obs, db, v.matrix)
+        bad |= beyond_completeness(pair_mag, db.stars.mag[field], np.isin(field, v.cat))
+    return bad
+
+
+def _stars_in_field(obs: Observation, db: NavDatabase, r_body: np.ndarray) -> np.ndarray:
+    """Catalogue rows predicted inside any camera's image under the ICRS -> body ``r_body``."""
+    tree = star_tree(db)
+    rows: list[np.ndarray] = []
+    for cam, mount in zip(obs.cameras, obs.mountings, strict=True):
+        r_cam = mount @ r_body
+        half = math.radians(cam.diagonal_fov_deg / 2 + 0.1)
+        near = np.asarray(tree.query_ball_point(r_cam[2], 2 * math.sin(half / 2)), dtype=np.int64)
+        if len(near):
+            _, inside = cam.vector_to_pixel(np.asarray(db.stars.vec[near]) @ r_cam.T)
+            rows.append(near[inside])
+    return np.unique(np.concatenate(rows)) if rows else np.zeros(0, np.int64)
+
+
 def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_rad: float,
               options: SolveOptions = DEFAULT_OPTIONS) -> Solution:
-    ref, seen = _apparent(db, v.cat, options)
     moved = options.epoch is not None or options.observer_velocity_km_s is not None
+    implausible = _implausible_pairs(obs, db, v)
+    if implausible.any():  # false detections paired with faint catalogue stars by position alone
+        v = Verified(v.obs[~implausible], v.cat[~implausible], v.matrix, v.false_prob, v.n_trials)
+        moved = True
+    ref, seen = _apparent(db, v.cat, options)
     fit = estimate(obs.vec[v.obs], seen, matrix=None if moved else v.matrix, prior_sigma_rad=sigma_rad)
     ra, dec, roll = radec_roll(fit.matrix)
     order = np.lexsort((obs.index[v.obs], obs.camera[v.obs]))

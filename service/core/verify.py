@@ -65,6 +65,8 @@ class Observation:
     cameras: tuple[Camera, ...]
     mountings: tuple[FloatArray, ...]
     by_camera: tuple[IntArray, ...] = field(default=())
+    flux: FloatArray | None = None
+    """(N,) fluxes as given (any linear unit), for the brightness check of the answer."""
 
     def __post_init__(self) -> None:
         if not self.by_camera:

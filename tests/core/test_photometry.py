@@ -1,0 +1,59 @@
+"""Brightness and completeness checks of an answer's pairs, and the wrong answers they fixed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from service.core.evaluate import score
+from service.core.photometry import beyond_completeness, too_bright
+from service.core.pipeline import SolveOptions, solve
+from service.core.presets import PRESETS
+from service.core.sim import SimConfig, simulate_frames
+
+FOUND = [
+    # (camera, noise px, false stars, mag noise, seed, frames, index): `python -m bench.bench_wrong
+    # --frames 24000` on the default database. A false star fell near a catalogue star fainter
+    # than the camera sees (the default set's deep member holds stars to 8 Mv) and was named.
+    ("seed000", 0.25, 2, 0.3, 18019190785799434842, 200, 123),
+    ("seed000", 0.25, 5, 0.0, 4463063595105581093, 200, 64),
+    ("seed000", 0.25, 5, 0.3, 14285705283403074772, 200, 72),
+    ("seed000", 1.0, 2, 0.3, 8938798499141819448, 200, 81),
+]
+
+
+@pytest.mark.parametrize("case", FOUND, ids=[f"{c[0]}-{c[1]}px-{c[2]}false-{c[6]}" for c in FOUND])
+def test_found_wrong_answers_name_no_false_star(case, default_set_db) -> None:
+    camera, noise, false, mag_noise, seed, n, index = case
+    preset = PRESETS[camera]
+    config = SimConfig(mag_limit=preset.mag_limit, centroid_noise_px=noise, false_stars=false, mag_noise=mag_noise)
+    frame = simulate_frames(preset.camera, n, config, rng=seed)[index]
+    sol = solve(frame.centroids, preset.camera, default_set_db, options=SolveOptions(centroid_sigma_px=noise))
+    assert sol.solved
+    s = score(sol, frame.quaternion, frame.hip.tolist(), blends=frame.blends)
+    assert s.correct and s.wrong_stars == 0
+
+
+def test_too_bright_flags_a_false_star_on_a_faint_catalogue_star() -> None:
+    rng = np.random.default_rng(1)
+    mag = np.array([3.1, 5.3, 5.5, 5.4, 6.3, 6.0, 6.3, 6.3, 6.5, 7.2])
+    flux = 10 ** (-0.4 * (mag - 13.3 + rng.normal(0, 0.3, len(mag))))
+    flux[-1] = 10 ** (-0.4 * (4.1 - 13.3))  # observed as a 4.1 mag star, named as a 7.2 mag one
+    assert too_bright(flux, mag).tolist() == [False] * 9 + [True]
+    saturated = flux.copy()
+    saturated[0] /= 30  # a saturated bright star is fainter than predicted: never flagged
+    assert not too_bright(saturated[:-1], mag[:-1]).any()
+    assert not too_bright(flux[:4], mag[:4]).any()  # too few pairs to judge
+
+
+def test_beyond_completeness_needs_most_brighter_stars_unseen() -> None:
+    pairs = np.array([4.0, 4.5, 5.0, 5.5, 6.0, 7.5])
+    field = np.concatenate([pairs, np.linspace(6.6, 7.4, 12)])
+    paired = np.concatenate([np.ones(6, bool), np.zeros(12, bool)])
+    assert beyond_completeness(pairs, field, paired).tolist() == [False] * 5 + [True]
+    # the same faint pair in a field where the brighter stars were seen is kept
+    assert not beyond_completeness(pairs, field, np.ones(len(field), bool)).any()
+    # a third of the field hidden (trees, a roof): kept
+    partly = np.ones(len(field), bool)
+    partly[6:10] = False
+    assert not beyond_completeness(pairs, field, partly).any()

@@ -17,6 +17,7 @@ import numpy as np
 
 from .apparent import aberrate, apparent_directions
 from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
+from .blends import dominant_pairs
 from .camera import Camera
 from .errors import InvalidInputError
 from .methods import SolveContext, get_matcher, resolve
@@ -268,6 +269,36 @@ def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified) -> np.nda
     return bad
 
 
+def _blend_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: float) -> Verified | None:
+    """``v`` with the blobs of close doubles named as their dominant star (see
+    :mod:`service.core.blends`), or None when there are none."""
+    free = np.ones(len(obs), dtype=bool)
+    free[v.obs] = False
+    if not free.any():
+        return None
+    field = _stars_in_field(obs, db, v.matrix)
+    field = field[~np.isin(field, v.cat)]
+    if len(field) == 0:
+        return None
+    add_o, add_c = [], []
+    faintest = float(np.max(db.stars.mag[v.cat]))
+    for c, (cam, mount) in enumerate(zip(obs.cameras, obs.mountings, strict=True)):
+        rows = np.flatnonzero((obs.camera == c) & free)
+        if len(rows) == 0:
+            continue
+        pxy, inside = cam.vector_to_pixel(np.asarray(db.stars.vec[field]) @ (mount @ v.matrix).T)
+        cam_field = field[inside]
+        mag = np.asarray(db.stars.mag[cam_field], np.float64)
+        # a blob is as bright as the stars already named, not a faint catalogue star's neighbour
+        o, p = dominant_pairs(obs.xy, rows, pxy[inside], mag, mag <= faintest + 0.5, radius_px)
+        add_o.append(o)
+        add_c.append(cam_field[p])
+    if not add_o or sum(len(o) for o in add_o) == 0:
+        return None
+    return Verified(np.concatenate([v.obs, *add_o]), np.concatenate([v.cat, *add_c]), v.matrix, v.false_prob,
+                    v.n_trials)
+
+
 def _stars_in_field(obs: Observation, db: NavDatabase, r_body: np.ndarray) -> np.ndarray:
     """Catalogue rows predicted inside any camera's image under the ICRS -> body ``r_body``."""
     tree = star_tree(db)
@@ -285,7 +316,10 @@ def _stars_in_field(obs: Observation, db: NavDatabase, r_body: np.ndarray) -> np
 def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_rad: float,
               options: SolveOptions = DEFAULT_OPTIONS) -> Solution:
     moved = options.epoch is not None or options.observer_velocity_km_s is not None
-    implausible = _implausible_pairs(obs, db, v)
+    blended = _blend_pairs(obs, db, v, options.match_radius_px or max(2.5, 3.0 * sigma_rad / obs.pixel_scale_rad))
+    if blended is not None:
+        v, moved = blended, True
+    implausible = _implausible_pairs(obs, db, v)  # also judges the blends just named
     if implausible.any():  # false detections paired with faint catalogue stars by position alone
         v = Verified(v.obs[~implausible], v.cat[~implausible], v.matrix, v.false_prob, v.n_trials)
         moved = True

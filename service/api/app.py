@@ -15,7 +15,9 @@ from ..core.pipeline import SolveOptions, warm_up
 from . import errors
 from .convert import camera_entry
 from .deps import require_api_key
+from .lifecycle import ConnectionLimit, Lifecycle
 from .limits import PathBodyLimit
+from .logs import RequestLog
 from .metrics import Metrics, MetricsMiddleware
 from .routes import health, metrics, solve, stream
 from .settings import Settings, get_settings
@@ -50,6 +52,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(PathBodyLimit, default=settings.max_body_bytes,
                        per_path={"/v1/solve/image": settings.max_upload_bytes})
     app.add_middleware(MetricsMiddleware, metrics=app.state.metrics)
+    app.state.lifecycle = Lifecycle(settings.max_connections)
+    app.add_middleware(ConnectionLimit, lifecycle=app.state.lifecycle, metrics=app.state.metrics)
+    app.add_middleware(RequestLog)  # outermost: every request and refusal gets an id and a log line
     keyed = [Depends(require_api_key)] if settings.api_key else []  # the OpenAPI says what is in force
     app.include_router(health.health_router)
     app.include_router(health.info_router, dependencies=keyed)

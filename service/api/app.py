@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from pathlib import Path
 
 from anyio import to_thread
 from fastapi import Depends, FastAPI
@@ -29,7 +30,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     """Open the database memory-mapped (once per worker) and resolve the named cameras."""
     s: Settings = app.state.settings
     path = s.db_path or await to_thread.run_sync(ensure_default_database)
-    app.state.db = open_database(path)
+    app.state.db = open_database(Path(path).resolve())  # one version, even if the symlink is swapped now
     await to_thread.run_sync(warm_up, app.state.db)  # matchers and k-d trees before the first request
     app.state.cameras = {name: camera_entry(spec, f"cameras.{name}") for name, spec in s.cameras.items()}
     app.state.solver = Solver(threads=s.solve_threads, timeout_s=s.solve_timeout_s, metrics=app.state.metrics,

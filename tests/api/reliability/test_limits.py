@@ -1,0 +1,212 @@
+"""One worker with small limits: connection limit, slow and hostile clients, graceful shutdown.
+
+The server (``skyfix serve``, one worker) is shared by the tests of this module, in order; the
+last one shuts it down with SIGTERM.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import signal
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
+
+from service.core.sim import SimFrame
+
+from ..conftest import real_stars, rows
+from .conftest import Served, rss_bytes, serve
+
+LIMIT = 3
+IN_FLIGHT = 4
+
+
+@pytest.fixture(scope="module")
+def small(module_tmp: Path, api_db_path: Path) -> Iterator[Served]:
+    with serve(module_tmp, api_db_path, workers=1, env={
+            "SKYFIX_MAX_CONNECTIONS": str(LIMIT), "SKYFIX_HEADER_TIMEOUT_S": "1",
+            "SKYFIX_MAX_IN_FLIGHT": str(IN_FLIGHT)}) as s:
+        yield s
+
+
+@pytest.fixture(scope="module")
+def good(frames: list[SimFrame]) -> list[str]:
+    """Centroid frames that solve, as stream messages."""
+    return [json.dumps({"id": i, "camera": "tetra3", "centroids": rows(f)})
+            for i, f in enumerate(f for f in frames if real_stars(f) >= 8)]
+
+
+def test_past_the_connection_limit_new_work_is_refused_and_streams_go_on(small: Served, good: list[str]) -> None:
+    with connect(small.ws_url) as a, connect(small.ws_url) as b, connect(small.ws_url) as c:
+        for ws in (a, b, c):
+            ws.send(good[0])
+            assert json.loads(ws.recv(timeout=30))["status"] == "solved"
+        with connect(small.ws_url) as d:  # the fourth: accepted, then closed with 1013 and why
+            with pytest.raises(ConnectionClosed) as closed:
+                d.recv(timeout=10)
+        assert closed.value.rcvd is not None and closed.value.rcvd.code == 1013
+        assert "full" in closed.value.rcvd.reason and str(LIMIT) in closed.value.rcvd.reason
+        r = httpx.post(small.url + "/v1/solve", content=good[1], headers={"content-type": "application/json"})
+        assert r.status_code == 503 and r.headers["retry-after"] == "1" and "full" in r.json()["detail"]
+        assert httpx.get(small.url + "/v1/health").status_code == 200  # never refused
+        for i, ws in enumerate((a, b, c)):  # the open streams are not disturbed
+            ws.send(good[2 + i])
+            assert json.loads(ws.recv(timeout=30))["id"] == 2 + i
+    deadline = time.monotonic() + 10  # the slots free up as the streams close
+    while (r := httpx.post(small.url + "/v1/solve", content=good[1],
+                           headers={"content-type": "application/json"})).status_code == 503:
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert r.status_code == 200
+    metrics = httpx.get(small.url + "/metrics").text
+    assert 'skyfix_rejected_total{kind="websocket",reason="limit"} 1.0' in metrics
+    assert 'skyfix_rejected_total{kind="http",reason="limit"}' in metrics
+
+
+def dribble(url: str, data: bytes, interval_s: float, limit_s: float) -> tuple[bytes, int, float]:
+    """Send ``data`` one byte per ``interval_s``; (what the server answered, bytes sent, seconds)."""
+    host, port = url.removeprefix("http://").split(":")
+    t0 = time.monotonic()
+    with socket.create_connection((host, int(port))) as s:
+        sent = 0
+        while time.monotonic() - t0 < limit_s:
+            if sent < len(data):
+                try:
+                    s.send(data[sent:sent + 1])
+                except OSError:
+                    break
+                sent += 1
+            if select.select([s], [], [], interval_s)[0]:
+                answer = b""
+                while chunk := s.recv(4096):
+                    answer += chunk
+                return answer, sent, time.monotonic() - t0
+    return b"", sent, time.monotonic() - t0
+
+
+def test_slowloris_headers_are_cut_off(small: Served) -> None:
+    request = b"GET /v1/health HTTP/1.1\r\nHost: 127.0.0.1\r\nUser-Agent: slow\r\n\r\n"
+    with ThreadPoolExecutor(2) as pool:
+        slow = pool.submit(dribble, small.url, request, 1.0, 10)  # one byte a second
+        silent = pool.submit(dribble, small.url, b"", 0.2, 10)  # connects, sends nothing
+        for _ in range(5):  # others are served meanwhile
+            assert httpx.get(small.url + "/v1/health").status_code == 200
+        for answer, sent, seconds in (slow.result(), silent.result()):
+            assert answer.startswith(b"HTTP/1.1 408 "), answer
+            assert json.loads(answer.split(b"\r\n\r\n", 1)[1])["field"] == "headers"
+            assert sent < len(request) and seconds < 4
+
+
+def test_a_client_that_never_reads_cannot_grow_server_memory(small: Served, frames: list[SimFrame]) -> None:
+    frame = next(f for f in frames if real_stars(f) >= 8)
+    faint = np.column_stack([np.random.default_rng(5).random((1500, 2)) * [1024, 768], np.full(1500, 1.0)])
+    big = [json.dumps({"id": i, "camera": "tetra3", "centroids": rows(frame) + faint.round(2).tolist()})
+           for i in range(4)]  # about 40 kB each: 10,000 of them are far more than socket buffers hold
+    worker = small.workers()[0]
+    before = rss_bytes(worker)
+    pushed = 0
+    host, port = small.url.removeprefix("http://").split(":")
+    sock = socket.create_connection((host, int(port)))
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 16 * 1024)
+    with connect(small.ws_url, sock=sock, max_queue=1) as ws:
+
+        def push() -> None:
+            nonlocal pushed
+            try:
+                for i in range(10_000):
+                    ws.send(big[i % len(big)])
+                    pushed += 1
+            except ConnectionClosed:
+                pass
+
+        sender = threading.Thread(target=push, daemon=True)
+        sender.start()
+        peak = before
+        t0 = time.monotonic()
+        while sender.is_alive() and time.monotonic() - t0 < 4:
+            peak = max(peak, rss_bytes(worker))
+            time.sleep(0.1)
+        ws.close_socket()
+        sender.join(timeout=10)
+    stalled = pushed
+    growth = (peak - before) / 2**20
+    print(f"\nnever-reading client: {stalled} of 10000 frames ({stalled * len(big[0]) / 2**20:.1f} MiB) "
+          f"taken in {time.monotonic() - t0:.1f} s; worker RSS {before / 2**20:.1f} -> peak "
+          f"{peak / 2**20:.1f} MiB (+{growth:.1f})")
+    assert growth < 24
+    assert stalled < 10_000, "back-pressure did not stop the sender"
+    with connect(small.ws_url) as other:  # the worker still answers others promptly
+        other.send(big[0])
+        assert json.loads(other.recv(timeout=10))["status"] == "solved"
+
+
+def test_a_flood_of_frames_without_solution_does_not_starve_another_client(small: Served,
+                                                                          good: list[str]) -> None:
+    rng = np.random.default_rng(7)
+    junk = [json.dumps({"id": i, "camera": "tetra3", "centroids": (rng.random((12, 2)) * [1024, 768]).round(2)
+                        .tolist()}) for i in range(64)]
+    stop = threading.Event()
+    flooded = [0]
+
+    def flood() -> None:
+        with connect(small.ws_url) as ws:
+            for i in range(10**6):
+                if stop.is_set():
+                    break
+                ws.send(junk[i % len(junk)])  # at full speed: back-pressure is the only brake
+                if i >= IN_FLIGHT:
+                    assert json.loads(ws.recv(timeout=30))["status"] == "no_solution"
+                    flooded[0] += 1
+
+    flooder = threading.Thread(target=flood, daemon=True)
+    latencies = []
+    with connect(small.ws_url) as ws:
+        for msg in good[:20]:  # baseline
+            ws.send(msg)
+            ws.recv(timeout=30)
+        flooder.start()
+        time.sleep(0.5)
+        for msg in good[:60]:
+            t0 = time.perf_counter()
+            ws.send(msg)
+            assert json.loads(ws.recv(timeout=30))["status"] == "solved"
+            latencies.append(time.perf_counter() - t0)
+    stop.set()
+    flooder.join(timeout=30)
+    p50, p99 = np.percentile(latencies, [50, 99]) * 1e3
+    print(f"\nwell-behaved client beside a no-solution flood ({flooded[0]} junk frames answered): "
+          f"p50 {p50:.1f} ms, p99 {p99:.1f} ms")
+    assert flooded[0] > 0 and p99 < 2000
+
+
+def test_sigterm_answers_what_was_read_closes_1001_and_finishes_rest(small: Served, good: list[str]) -> None:
+    """Last test of the module: the server goes away."""
+    slow = json.dumps({"camera": "tetra3", "centroids": (np.random.default_rng(3).random((40, 2)) * [1024, 768])
+                       .round(2).tolist()})
+    with connect(small.ws_url) as ws, ThreadPoolExecutor(2) as pool:
+        for msg in good[:IN_FLIGHT + 4]:
+            ws.send(msg)
+        rest = [pool.submit(httpx.post, small.url + "/v1/solve", content=slow, timeout=30,
+                            headers={"content-type": "application/json"}) for _ in range(2)]
+        time.sleep(0.05)
+        os.kill(small.proc.pid, signal.SIGTERM)
+        answered = []
+        with pytest.raises(ConnectionClosed) as closed:
+            while True:
+                answered.append(json.loads(ws.recv(timeout=30))["id"])
+        assert [r.result().status_code for r in rest] == [200, 200]  # REST in flight completes
+    assert closed.value.rcvd is not None and closed.value.rcvd.code == 1001, closed.value
+    assert answered == list(range(len(answered))) and len(answered) >= 1  # read frames answered, in order
+    print(f"\nSIGTERM: {len(answered)} of {IN_FLIGHT + 4} frames answered before 1001")
+    assert small.proc.wait(timeout=30) == 0

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -20,9 +19,9 @@ from pathlib import Path
 import httpx
 import pytest
 
-from ..conftest import CAMERA_SPEC, ROOT, free_port
+from ..conftest import CAMERA_SPEC, ROOT, free_port, stop_serve
 
-CAMERAS = json.dumps({"tetra3": CAMERA_SPEC})
+CAMERAS = json.dumps({"tetra3": CAMERA_SPEC, "bench": CAMERA_SPEC})  # bench: bench_soak's frames
 
 
 @dataclass
@@ -125,13 +124,7 @@ def serve(tmp: Path, db: Path, workers: int = 1, env: dict[str, str] | None = No
             time.sleep(0.2)
         yield served
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        stop_serve(proc)
 
 
 @pytest.fixture(scope="module")

@@ -39,7 +39,8 @@ def configure(level: str | int = "info") -> None:
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(message)s"))
     log.handlers[:] = [handler]
-    log.setLevel(level.upper() if isinstance(level, str) else level)
+    named = logging.getLevelName(level.upper()) if isinstance(level, str) else level
+    log.setLevel(named if isinstance(named, int) else logging.DEBUG)  # uvicorn's "trace": everything
     log.propagate = False
 
 

@@ -121,6 +121,9 @@ class Supervisor:
         metrics_dir = tempfile.mkdtemp(prefix="skyfix-metrics-") if own_dir else \
             os.environ["PROMETHEUS_MULTIPROC_DIR"]
         os.environ["PROMETHEUS_MULTIPROC_DIR"] = metrics_dir  # inherited by the spawned workers
+        # spawn re-imports ``python -m service.cli.serve`` in each worker, and runpy warns about it
+        os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (os.environ.get("PYTHONWARNINGS"),
+                                                              "ignore::RuntimeWarning:runpy")))
         handled = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
         previous = {sig: signal.signal(sig, lambda s, _f: self.signals.append(s)) for sig in handled}
         self.sockets = [self.config.bind_socket()]

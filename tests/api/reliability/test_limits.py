@@ -201,7 +201,10 @@ def test_sigterm_answers_what_was_read_closes_1001_and_finishes_rest(small: Serv
             ws.send(msg)
         rest = [pool.submit(httpx.post, small.url + "/v1/solve", content=slow, timeout=30,
                             headers={"content-type": "application/json"}) for _ in range(2)]
-        time.sleep(0.05)
+        deadline = time.monotonic() + 10
+        while "skyfix_open_connections 3.0" not in httpx.get(small.url + "/metrics").text:  # all in flight
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
         os.kill(small.proc.pid, signal.SIGTERM)
         answered = []
         with pytest.raises(ConnectionClosed) as closed:

@@ -12,7 +12,7 @@ stop at once on the first SIGTERM/SIGINT. It tells every ``Lifecycle`` to drain:
 stops reading, answers the frames it has read, and closes with 1001 (going away); new streams
 are closed with 1001 at once; REST keeps being served. When no stream is left (or after
 ``drain_timeout_s``) uvicorn's own shutdown runs, which lets REST requests in flight finish.
-A second signal stops at once.
+A second SIGINT stops at once.
 """
 
 from __future__ import annotations
@@ -129,8 +129,12 @@ class DrainingServer(uvicorn.Server):
         self._apps: list[Lifecycle] = []
 
     def handle_exit(self, sig: int, frame: FrameType | None) -> None:
-        if self._drain_asked or self.should_exit or sig not in (signal.SIGTERM, signal.SIGINT):
+        if self.should_exit or sig not in (signal.SIGTERM, signal.SIGINT):
             super().handle_exit(sig, frame)
+            return
+        if self._drain_asked:  # Ctrl+C reaches the workers and the supervisor, which then sends SIGTERM:
+            if sig == signal.SIGINT:  # only a second SIGINT cuts the drain short
+                super().handle_exit(sig, frame)
             return
         self._captured_signals.append(sig)  # re-raised after the shutdown, as uvicorn does
         self._drain_asked = True  # acted on in on_tick, on the event loop (not in the signal handler)

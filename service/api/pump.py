@@ -50,7 +50,7 @@ async def pump(ws: WebSocket, handle: Handler, *, max_in_flight: int, lifecycle:
                         if msg["type"] == "websocket.disconnect":
                             state["gone"] = True
                             return
-                        await to_answer.send(msg)
+                        to_answer.send_nowait(msg)  # no await: a drain cannot drop a message read
                 except WebSocketDisconnect:
                     state["gone"] = True
 

@@ -74,11 +74,16 @@ def test_past_the_connection_limit_new_work_is_refused_and_streams_go_on(small: 
     assert 'skyfix_rejected_total{kind="http",reason="limit"}' in metrics
 
 
-def dribble(url: str, data: bytes, interval_s: float, limit_s: float) -> tuple[bytes, int, float]:
-    """Send ``data`` one byte per ``interval_s``; (what the server answered, bytes sent, seconds)."""
+def dribble(url: str, data: bytes, interval_s: float, limit_s: float,
+            first: bytes = b"") -> tuple[bytes, int, float]:
+    """Send ``data`` one byte per ``interval_s`` (after a whole request ``first`` and its answer,
+    on the same keep-alive connection); (what the server answered, bytes sent, seconds)."""
     host, port = url.removeprefix("http://").split(":")
-    t0 = time.monotonic()
     with socket.create_connection((host, int(port))) as s:
+        if first:
+            s.sendall(first)
+            assert s.recv(4096).startswith(b"HTTP/1.1 200 ")
+        t0 = time.monotonic()
         sent = 0
         while time.monotonic() - t0 < limit_s:
             if sent < len(data):
@@ -97,12 +102,13 @@ def dribble(url: str, data: bytes, interval_s: float, limit_s: float) -> tuple[b
 
 def test_slowloris_headers_are_cut_off(small: Served) -> None:
     request = b"GET /v1/health HTTP/1.1\r\nHost: 127.0.0.1\r\nUser-Agent: slow\r\n\r\n"
-    with ThreadPoolExecutor(2) as pool:
+    with ThreadPoolExecutor(3) as pool:
         slow = pool.submit(dribble, small.url, request, 1.0, 10)  # one byte a second
         silent = pool.submit(dribble, small.url, b"", 0.2, 10)  # connects, sends nothing
+        second = pool.submit(dribble, small.url, request, 1.0, 10, request)  # keep-alive, then slow
         for _ in range(5):  # others are served meanwhile
             assert httpx.get(small.url + "/v1/health").status_code == 200
-        for answer, sent, seconds in (slow.result(), silent.result()):
+        for answer, sent, seconds in (slow.result(), silent.result(), second.result()):
             assert answer.startswith(b"HTTP/1.1 408 "), answer
             assert json.loads(answer.split(b"\r\n\r\n", 1)[1])["field"] == "headers"
             assert sent < len(request) and seconds < 4

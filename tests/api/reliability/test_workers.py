@@ -162,7 +162,7 @@ def test_database_rebuilt_while_serving_workers_move_on_sighup(pair: Served, db_
     runner.start()
     new_config = BuildConfig(fov_max_deg=15.0, fov_min_deg=7.0, mag_limit=5.8, methods=("pyramid", "maxangle"))
     build_database(db_link, new_config)  # in place: a new directory, then the symlink swapped
-    time.sleep(1.0)
+    time.sleep(0.5)
     assert set(seen) == old  # the workers keep the database they opened (its old files stay mapped)
     os.kill(pair.proc.pid, signal.SIGHUP)
     deadline = time.monotonic() + 90

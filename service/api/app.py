@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from pathlib import Path
 
 from anyio import to_thread
 from fastapi import Depends, FastAPI
@@ -15,7 +16,9 @@ from ..core.pipeline import SolveOptions, warm_up
 from . import errors
 from .convert import camera_entry
 from .deps import require_api_key
+from .lifecycle import ConnectionLimit, Lifecycle
 from .limits import PathBodyLimit
+from .logs import RequestLog
 from .metrics import Metrics, MetricsMiddleware
 from .routes import health, metrics, solve, stream
 from .settings import Settings, get_settings
@@ -27,7 +30,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     """Open the database memory-mapped (once per worker) and resolve the named cameras."""
     s: Settings = app.state.settings
     path = s.db_path or await to_thread.run_sync(ensure_default_database)
-    app.state.db = open_database(path)
+    app.state.db = open_database(Path(path).resolve())  # one version, even if the symlink is swapped now
     await to_thread.run_sync(warm_up, app.state.db)  # matchers and k-d trees before the first request
     app.state.cameras = {name: camera_entry(spec, f"cameras.{name}") for name, spec in s.cameras.items()}
     app.state.solver = Solver(threads=s.solve_threads, timeout_s=s.solve_timeout_s, metrics=app.state.metrics,
@@ -50,6 +53,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(PathBodyLimit, default=settings.max_body_bytes,
                        per_path={"/v1/solve/image": settings.max_upload_bytes})
     app.add_middleware(MetricsMiddleware, metrics=app.state.metrics)
+    app.state.lifecycle = Lifecycle(settings.max_connections)
+    app.add_middleware(ConnectionLimit, lifecycle=app.state.lifecycle, metrics=app.state.metrics)
+    app.add_middleware(RequestLog)  # outermost: every request and refusal gets an id and a log line
     keyed = [Depends(require_api_key)] if settings.api_key else []  # the OpenAPI says what is in force
     app.include_router(health.health_router)
     app.include_router(health.info_router, dependencies=keyed)

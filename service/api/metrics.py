@@ -1,81 +1,93 @@
-"""Prometheus metrics of one worker, in the text exposition format (written by hand).
+"""Prometheus metrics (``prometheus_client``), exact across ``--workers N``.
 
-Why not ``prometheus_client``: we need three counters and one histogram, and its
-multi-process mode (the only way to add up ``--workers N``) needs a shared scratch directory
-and cleanup on restart. Each worker here reports its own series with a ``worker`` label
-(the pid); sum over it in PromQL, or run one worker per container for exact totals.
+Under ``skyfix serve`` the supervisor sets ``PROMETHEUS_MULTIPROC_DIR`` to a fresh directory
+before it starts the workers; each worker then writes its counters to memory-mapped files
+there, and ``GET /metrics`` on any worker adds up all of them (``MultiProcessCollector``), the
+counts of workers that have died or been replaced included. Without that variable (the
+in-process test server) each ``Metrics`` has its own registry.
 
-All updates happen on the event loop thread, so plain dicts need no lock.
+Series: ``skyfix_http_requests_total{route,method,status}``, ``skyfix_solves_total{method,
+outcome,reason}``, ``skyfix_stream_messages_total{kind}``, ``skyfix_solve_seconds`` (histogram),
+``skyfix_rejected_total{kind,reason}`` (connection limit, drain), ``skyfix_open_connections``.
 """
 
 from __future__ import annotations
 
-import bisect
 import os
 import time
-from collections import Counter
 from typing import Any
 
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
+from prometheus_client.multiprocess import MultiProcessCollector
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 _METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"})
 SOLVE_BUCKETS_S = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)
+CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
+
+
+def multiprocess_dir() -> str | None:
+    """The shared directory of the workers' metric files, if in multiprocess mode."""
+    return os.environ.get("PROMETHEUS_MULTIPROC_DIR") or None
+
+
+class _KindCounter:
+    """``ws_frames[kind] += 1`` on a labelled counter (reads give this process's count)."""
+
+    def __init__(self, counter: Counter) -> None:
+        self._counter = counter
+        self._seen: dict[str, float] = {}
+
+    def __getitem__(self, kind: str) -> float:
+        return self._seen.get(kind, 0.0)
+
+    def __setitem__(self, kind: str, value: float) -> None:
+        self._counter.labels(kind=kind).inc(value - self._seen.get(kind, 0.0))
+        self._seen[kind] = value
 
 
 class Metrics:
-    """Request counts by route and status, solve outcomes, and a solve-latency histogram."""
+    """Request counts by route and status, solve outcomes by reason, and a solve-latency histogram."""
 
     def __init__(self) -> None:
         self.started = time.time()
-        self.requests: Counter[tuple[str, str, int]] = Counter()
-        self.solves: Counter[tuple[str, str]] = Counter()
-        self.ws_frames: Counter[str] = Counter()
-        self.solve_buckets = [0] * (len(SOLVE_BUCKETS_S) + 1)
-        self.solve_sum_s = 0.0
+        self.registry = CollectorRegistry(auto_describe=True)
+        r = self.registry
+        self._requests = Counter("skyfix_http_requests", "HTTP requests by route template and status.",
+                                 ("route", "method", "status"), registry=r)
+        self._solves = Counter("skyfix_solves", "Solves by method used, outcome and reason.",
+                               ("method", "outcome", "reason"), registry=r)
+        self._frames = Counter("skyfix_stream_messages", "WebSocket messages by kind.", ("kind",), registry=r)
+        self._seconds = Histogram("skyfix_solve_seconds", "Wall time of a solve, queueing in the thread pool "
+                                  "included.", buckets=SOLVE_BUCKETS_S, registry=r)
+        self._rejected = Counter("skyfix_rejected", "Connections refused: kind http|websocket, reason "
+                                 "limit|draining.", ("kind", "reason"), registry=r)
+        self.open_connections = Gauge("skyfix_open_connections", "HTTP requests and WebSocket streams in "
+                                      "progress.", registry=r, multiprocess_mode="livesum")
+        start = Gauge("skyfix_start_time_seconds", "Unix time the oldest live worker started.", registry=r,
+                      multiprocess_mode="livemin")
+        start.set(self.started)
+        self.ws_frames = _KindCounter(self._frames)
 
     def request(self, route: str, method: str, status: int) -> None:
-        self.requests[(route, method, status)] += 1
+        self._requests.labels(route=route, method=method, status=str(status)).inc()
 
-    def solve(self, method: str, outcome: str, seconds: float | None = None) -> None:
-        """Count one solve (``solved`` / ``no_solution`` / ``timeout``) and its wall time."""
-        self.solves[(method, outcome)] += 1
+    def solve(self, method: str, outcome: str, seconds: float | None = None, reason: str | None = None) -> None:
+        """Count one solve (``solved`` / ``no_solution`` / ``timeout``), why, and its wall time."""
+        self._solves.labels(method=method, outcome=outcome, reason=reason or outcome).inc()
         if seconds is not None:
-            self.solve_buckets[bisect.bisect_left(SOLVE_BUCKETS_S, seconds)] += 1
-            self.solve_sum_s += seconds
+            self._seconds.observe(seconds)
+
+    def rejected(self, kind: str, reason: str) -> None:
+        self._rejected.labels(kind=kind, reason=reason).inc()
 
     def render(self) -> str:
-        """The exposition text (``text/plain; version=0.0.4``)."""
-        w = f'worker="{os.getpid()}"'
-        out = [
-            "# HELP skyfix_http_requests_total HTTP requests by route template and status.",
-            "# TYPE skyfix_http_requests_total counter",
-        ]
-        for (route, method, status), n in sorted(self.requests.items()):
-            out.append(f'skyfix_http_requests_total{{{w},route="{route}",method="{method}",status="{status}"}} {n}')
-        out += ["# HELP skyfix_solves_total Solves by method used and outcome.",
-                "# TYPE skyfix_solves_total counter"]
-        for (method, outcome), n in sorted(self.solves.items()):
-            out.append(f'skyfix_solves_total{{{w},method="{_esc(method)}",outcome="{outcome}"}} {n}')
-        out += ["# HELP skyfix_stream_messages_total WebSocket messages by kind.",
-                "# TYPE skyfix_stream_messages_total counter"]
-        for kind, n in sorted(self.ws_frames.items()):
-            out.append(f'skyfix_stream_messages_total{{{w},kind="{kind}"}} {n}')
-        out += ["# HELP skyfix_solve_seconds Wall time of a solve, queueing in the thread pool included.",
-                "# TYPE skyfix_solve_seconds histogram"]
-        cum = 0
-        for le, n in zip((*SOLVE_BUCKETS_S, "+Inf"), self.solve_buckets, strict=True):
-            cum += n
-            out.append(f'skyfix_solve_seconds_bucket{{{w},le="{le}"}} {cum}')
-        out.append(f"skyfix_solve_seconds_sum{{{w}}} {self.solve_sum_s:.6f}")
-        out.append(f"skyfix_solve_seconds_count{{{w}}} {cum}")
-        out += ["# HELP skyfix_start_time_seconds Unix time this worker started.",
-                "# TYPE skyfix_start_time_seconds gauge",
-                f"skyfix_start_time_seconds{{{w}}} {self.started:.3f}"]
-        return "\n".join(out) + "\n"
-
-
-def _esc(s: str) -> str:
-    return s.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+        """The exposition text (``text/plain; version=0.0.4``): all workers' totals in multiprocess mode."""
+        if multiprocess_dir():
+            registry = CollectorRegistry()
+            MultiProcessCollector(registry)
+            return generate_latest(registry).decode()
+        return generate_latest(self.registry).decode()
 
 
 class MetricsMiddleware:

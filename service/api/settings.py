@@ -55,6 +55,20 @@ class Settings(BaseSettings):
         "more threads add contention, not speed; the second keeps one slow solve from stalling the worker. "
         "Scale with --workers (one per core).",
     )
+    max_connections: int = Field(
+        256, ge=1, le=100_000, description="HTTP requests and WebSocket streams served at once by each worker; "
+        "past it REST gets 503 with Retry-After and a stream is closed with 1013 (/v1/health, /metrics exempt)."
+    )
+    max_in_flight: int = Field(
+        8, ge=1, le=1024, description="Messages a stream may have read and not yet answered; then the server "
+        "stops reading that connection (back-pressure)."
+    )
+    header_timeout_s: float = Field(
+        10.0, gt=0, le=3600, description="A request's headers must arrive within this, s (408 and close)."
+    )
+    drain_timeout_s: float = Field(
+        10.0, gt=0, le=3600, description="On SIGTERM, time for streams to answer what they have read, s."
+    )
     cameras: dict[str, CameraSpec] = Field(
         default_factory=dict, description="Named cameras (JSON: name -> camera spec, mounting optional)."
     )

@@ -61,7 +61,7 @@ class Solver:
         except SolveTimeoutError:
             self.metrics.solve("unknown", "timeout", time.perf_counter() - t0)
             raise
-        self.metrics.solve(sol.method, sol.status.value, time.perf_counter() - t0)
+        self.metrics.solve(sol.method, sol.status.value, time.perf_counter() - t0, reason=_reason(sol))
         return sol
 
     def _counted(self, fn: Callable[[], T]) -> T:
@@ -72,3 +72,11 @@ class Solver:
         finally:
             with self._lock:
                 self._running -= 1
+
+
+def _reason(sol: Solution) -> str | None:
+    """Why a solve ended as it did (``Solution.reason`` where the engine gives one), as a label value."""
+    reason = getattr(sol, "reason", None)
+    if reason is None:
+        return None
+    return str(getattr(reason, "value", reason))[:64]

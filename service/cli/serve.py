@@ -1,5 +1,8 @@
 """``skyfix serve``: run the API under uvicorn (``--workers N`` share one memory-mapped database).
 
+The workers run under ``service.cli.supervisor`` (for any N, 1 included): a worker that dies
+is restarted, SIGTERM drains, SIGHUP restarts the workers one by one (onto a rebuilt database).
+
 Options override the ``SKYFIX_*`` environment; the result is written back into the
 environment so that every worker process (uvicorn spawns them and calls the app factory,
 ``service.api.app:create_app``) reads the same settings. The API key is taken from
@@ -16,6 +19,8 @@ import typer
 from pydantic import ValidationError
 
 APP_FACTORY = "service.api.app:create_app"
+HTTP_PROTOCOL = "service.api.header_timeout:HeaderTimeoutProtocol"
+"""uvicorn's httptools protocol with a time limit on request headers (slowloris)."""
 WS_MAX_QUEUE = 4
 """WebSocket messages uvicorn buffers per connection before it stops reading the socket (TCP
 back-pressure); with images of up to max_image_bytes this bounds a connection's memory."""
@@ -36,6 +41,7 @@ def serve(
     from ..api.settings import Settings
     from ..core.errors import DatabaseError
     from ..core.navdb import open_database
+    from .supervisor import Supervisor
 
     overrides = {k: v for k, v in {"host": host, "port": port, "workers": workers, "db_path": db}.items()
                  if v is not None}
@@ -51,12 +57,15 @@ def serve(
         typer.echo(f"skyfix serve: {exc}", err=True)
         raise typer.Exit(2) from None
     os.environ.update({"SKYFIX_HOST": settings.host, "SKYFIX_PORT": str(settings.port),
-                       "SKYFIX_WORKERS": str(settings.workers), "SKYFIX_DB_PATH": str(path)})
-    uvicorn.run(APP_FACTORY, factory=True, host=settings.host, port=settings.port, workers=settings.workers,
-                ws_max_size=settings.ws_max_message_bytes + 1024, ws_max_queue=WS_MAX_QUEUE,
-                ws_per_message_deflate=False,
-                log_level=log_level, server_header=False,
-                timeout_graceful_shutdown=10)
+                       "SKYFIX_WORKERS": str(settings.workers), "SKYFIX_DB_PATH": str(path),
+                       "SKYFIX_HEADER_TIMEOUT_S": repr(settings.header_timeout_s)})
+    config = uvicorn.Config(APP_FACTORY, factory=True, host=settings.host, port=settings.port,
+                            http=HTTP_PROTOCOL, ws_max_size=settings.ws_max_message_bytes + 1024,
+                            ws_max_queue=WS_MAX_QUEUE, ws_per_message_deflate=False,
+                            log_level=log_level, access_log=False, server_header=False,
+                            timeout_graceful_shutdown=10)
+    raise typer.Exit(Supervisor(config, settings.workers, drain_timeout_s=settings.drain_timeout_s,
+                                access_log_level=log_level).run())
 
 
 def _default_database() -> Path:

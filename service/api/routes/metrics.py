@@ -1,4 +1,4 @@
-"""``GET /metrics``: Prometheus text exposition of this worker."""
+"""``GET /metrics``: Prometheus text exposition, totals over all workers (see ``service.api.metrics``)."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ from fastapi import APIRouter
 from fastapi.responses import PlainTextResponse
 
 from ..deps import MetricsDep
+from ..metrics import CONTENT_TYPE
 
 router = APIRouter(tags=["service"])
 
@@ -13,4 +14,4 @@ router = APIRouter(tags=["service"])
 @router.get("/metrics", response_class=PlainTextResponse)
 async def metrics(m: MetricsDep) -> PlainTextResponse:
     """Requests by route and status, solve outcomes, solve latency histogram."""
-    return PlainTextResponse(m.render(), media_type="text/plain; version=0.0.4; charset=utf-8")
+    return PlainTextResponse(m.render(), media_type=CONTENT_TYPE)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, Query, WebSocket
 from pydantic import ValidationError
 
 from client.models import CameraSpec, SolveRequest, SolveResult, StreamAck, StreamConfig, StreamError
@@ -28,6 +28,7 @@ from ...core.types import Solution
 from .. import convert
 from ..deps import API_KEY_HEADER, CamerasDep, NavDbDep, SettingsDep, SolverDep, key_ok
 from ..errors import ApiError, error_status
+from ..pump import pump
 from ..settings import Settings
 from ..solver import Solver
 
@@ -62,14 +63,8 @@ async def stream(
         return
     await ws.accept()
     frames = _Frames(db, solver, cameras, settings, StreamState(camera, fov_deg, method, track, hint_radius_deg))
-    try:
-        while True:
-            msg = await ws.receive()
-            if msg["type"] == "websocket.disconnect":
-                return
-            await ws.send_text(await frames.handle(msg.get("text"), msg.get("bytes")))
-    except WebSocketDisconnect:
-        return
+    await pump(ws, frames.handle, max_in_flight=settings.max_in_flight,
+               lifecycle=getattr(ws.app.state, "lifecycle", None))
 
 
 class _Frames:

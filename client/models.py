@@ -149,6 +149,10 @@ class StarResult(BaseModel):
     residual_arcsec: float = Field(description="Angle between the observed and the catalogue direction.")
 
 
+NoSolutionReason = Literal["too_few_stars", "camera_outside_database", "no_pattern_match", "not_proven", "time_limit"]
+"""Machine-readable reasons for ``no_solution`` (``SolveResult.reason``)."""
+
+
 class SolveResult(BaseModel):
     """A solve's outcome: ``solved`` with attitude and stars, or ``no_solution`` (never a guess)."""
 
@@ -168,7 +172,24 @@ class SolveResult(BaseModel):
     attitude_sigma_arcsec: list[float] | None = Field(
         None, description="1-sigma attitude error about camera x, y (cross-boresight) and z (roll), arcsec."
     )
-    method: str = Field(description="Method that produced the answer (or the last one tried).")
+    method: str = Field(
+        description="Method that produced the answer; for no_solution the last one tried, or the requested "
+        "name ('auto') when the frame was refused before any method ran."
+    )
+    methods_tried: list[str] = Field(
+        default_factory=list, description="Methods that actually ran on the frame, in order (auto's expansion)."
+    )
+    reason: NoSolutionReason | None = Field(
+        None,
+        description="Why no_solution (null when solved): too_few_stars (under 3 centroids) and "
+        "camera_outside_database (no database member serves the camera's field) are refused at once, before "
+        "any search; no_pattern_match (no catalogue pattern matched), not_proven (candidates checked, none "
+        "proven beyond the coincidence bound), time_limit (the time limit ended the search).",
+    )
+    message: str | None = Field(
+        None, description="The reason in words, for people (for camera_outside_database: the `skyfix db build` "
+        "command that would serve the camera). Not a stable interface: parse `reason`."
+    )
     timings_ms: dict[str, float] = Field(default_factory=dict, description="Per-stage wall time, ms.")
     wcs: dict[str, float | str] | None = Field(
         None,

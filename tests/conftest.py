@@ -32,11 +32,11 @@ def seed000_db(tmp_path_factory: pytest.TempPathFactory) -> NavDatabase:
 
 @pytest.fixture(scope="session")
 def default_set_db(tmp_path_factory: pytest.TempPathFactory):
-    """The default database set's members, built once per test session into a temp dir."""
-    from service.core.navdb import build_database_set
-    from service.core.navdb.default import DEFAULT_MEMBERS
+    """The default database set, as ``skyfix`` builds it on first use (into ``$SKYFIX_DB_DIR``: a
+    temp dir in CI), so that the session builds it once for these tests and the service's."""
+    from service.core.navdb.default import ensure_default_database
 
-    return open_database(build_database_set(tmp_path_factory.mktemp("dbset") / "default", DEFAULT_MEMBERS))
+    return open_database(ensure_default_database())
 
 
 @pytest.fixture

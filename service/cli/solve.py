@@ -1,9 +1,12 @@
-"""``skyfix solve FRAMES.jsonl``: identify recorded frames of centroids."""
+"""``skyfix solve FRAMES.jsonl``: identify recorded frames of centroids on all cores."""
 
 from __future__ import annotations
 
 import json
+import os
 import sys
+from collections import Counter
+from itertools import islice
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -12,52 +15,90 @@ import typer
 
 from ._progress import err_console, resolve_db
 
+BLOCK = 50_000
+"""Lines read, solved and written per block (bounds memory on long recordings)."""
+
 
 def solve_frames(
     frames: Annotated[Path, typer.Argument(help="Recording: JSON Lines, one frame a line ('-' = stdin).")],
     db: Annotated[Path | None, typer.Option(help="Database directory (default: the default one).")] = None,
     method: Annotated[str, typer.Option(help="Method name or 'auto'.")] = "auto",
     sigma: Annotated[float, typer.Option(help="Expected centroid error, px.")] = 1.0,
+    workers: Annotated[int | None, typer.Option(min=1, help="Worker processes (default: all cores).")] = None,
 ) -> None:
-    """Print one JSON result per frame on stdout, then a summary on stderr."""
-    from ..core.batch import frame_from_record, solve_frame
-    from ..core.errors import SkyfixError
-    from ..core.evaluate import score
+    """Print one JSON result per frame on stdout (in order), then a summary on stderr: the
+    share identified, wrong answers against any truth, frames/s (reading, solving and writing,
+    after the database is opened and warmed up), and no-solutions by reason."""
+    import time
+
+    from ..core.batch import FrameError, solve_many
     from ..core.navdb import open_database
-    from ..core.pipeline import SolveOptions
+    from ..core.pipeline import SolveOptions, warm_up
 
     database = open_database(resolve_db(db))
+    warm_up(database)  # before the clock: frames/s below is of solving, not of starting
     options = SolveOptions(centroid_sigma_px=sigma)
     stream = sys.stdin if str(frames) == "-" else open(frames)
-    times, n, solved, wrong, checked = [], 0, 0, 0, 0
+    times: list[float] = []
+    n = solved = wrong = checked = 0
+    reasons: Counter[str] = Counter()
+    t0 = time.perf_counter()
     with stream:
-        for lineno, line in enumerate(stream, 1):
-            if not line.strip():
-                continue
-            n += 1
-            try:
-                rec: dict[str, Any] = json.loads(line)
-                sol = solve_frame(frame_from_record(rec), database, method=method, options=options)
-            except (SkyfixError, ValueError, KeyError, TypeError) as exc:
-                err_console.print(f"[red]line {lineno}:[/red] {exc}")
-                raise typer.Exit(2) from None
-            out = sol.to_dict(rec.get("id"))
-            typer.echo(json.dumps(out))
-            times.append(sol.timings_ms.get("total", 0.0))
-            solved += sol.solved
-            truth = rec.get("truth") or {}
-            if sol.solved and truth:
-                blends = {int(k): v for k, v in (truth.get("blends") or {}).items()}
-                # a rig's truth lists every camera's HIPs one camera after the other
-                sizes = [len(c.get("centroids", [])) for c in rec["cameras"]] if rec.get("cameras") else [0]
-                hips = truth.get("hip")
-                correct = all(score(sol, truth.get("quaternion"), None if hips is None else hips[o:],
-                                    camera=c, blends={k - o: v for k, v in blends.items() if k >= o}).correct
-                              for c, o in enumerate(np.cumsum([0, *sizes[:-1]]).tolist()))
-                checked += 1
-                wrong += not correct
+        lineno = 0
+        while True:
+            block = list(islice(stream, BLOCK))
+            if not block:
+                break
+            numbered = [(lineno + i + 1, line) for i, line in enumerate(block) if line.strip()]
+            lineno += len(block)
+            results = solve_many([line for _, line in numbered], database, method=method, options=options,
+                                 workers=workers, then=_answer, return_errors=True)
+            out = []
+            for (num, _), res in zip(numbered, results, strict=True):
+                if isinstance(res, FrameError):
+                    sys.stdout.write("".join(out))
+                    err_console.print(f"[red]line {num}:[/red] {res.message}")
+                    raise typer.Exit(2)
+                text, ok, reason, correct, ms = res
+                out.append(text + "\n")
+                n += 1
+                solved += ok
+                times.append(ms)
+                if reason:
+                    reasons[reason] += 1
+                if correct is not None:
+                    checked += 1
+                    wrong += not correct
+            sys.stdout.write("".join(out))
+    wall = time.perf_counter() - t0
     t = np.array(times) if times else np.zeros(1)
+    why = ", ".join(f"{k} {v}" for k, v in reasons.most_common())
     err_console.print(
         f"{solved}/{n} identified ({100 * solved / max(n, 1):.1f}%), {wrong} wrong of {checked} with truth; "
-        f"solve ms p50 {np.percentile(t, 50):.2f} p95 {np.percentile(t, 95):.2f} p99 {np.percentile(t, 99):.2f}"
+        f"solve ms p50 {np.percentile(t, 50):.2f} p95 {np.percentile(t, 95):.2f} p99 {np.percentile(t, 99):.2f}; "
+        f"{n / max(wall, 1e-9):.0f} frames/s on {workers or _cores()} worker(s)"
+        + (f"; no_solution by reason: {why}" if why else "")
     )
+
+
+def _cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _answer(rec: dict[str, Any], sol: Any) -> tuple[str, bool, str | None, bool | None, float]:
+    """In the worker: the frame's JSON answer, whether it solved, why not, whether it matches
+    the recording's truth (None without truth) and its solve time, ms."""
+    from ..core.evaluate import score
+
+    correct = None
+    truth = rec.get("truth") or {}
+    if sol.solved and truth:
+        blends = {int(k): v for k, v in (truth.get("blends") or {}).items()}
+        # a rig's truth lists every camera's HIPs one camera after the other
+        sizes = [len(c.get("centroids", [])) for c in rec["cameras"]] if rec.get("cameras") else [0]
+        hips = truth.get("hip")
+        correct = all(score(sol, truth.get("quaternion"), None if hips is None else hips[o:],
+                            camera=c, blends={k - o: v for k, v in blends.items() if k >= o}).correct
+                      for c, o in enumerate(np.cumsum([0, *sizes[:-1]]).tolist()))
+    reason = None if sol.reason is None else sol.reason.value
+    return json.dumps(sol.to_dict(rec.get("id"))), sol.solved, reason, correct, sol.timings_ms.get("total", 0.0)

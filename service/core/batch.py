@@ -1,4 +1,4 @@
-"""Many frames per call: recorded frames parsed once, solved on a pool of threads.
+"""Many frames per call: recorded frames parsed and solved on all cores (forked workers).
 
 This is the batch path of the engine, for ground processing of recordings (``skyfix solve``,
 ``skyfix reprocess``). A *frame* is one instant: one camera's centroids, or a rig's cameras.
@@ -6,16 +6,18 @@ This is the batch path of the engine, for ground processing of recordings (``sky
 
 from __future__ import annotations
 
+import json
+import multiprocessing as mp
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
 from .camera import Camera
-from .errors import InvalidInputError
+from .errors import InvalidInputError, SkyfixError
 from .navdb.reader import NavDatabase, NavDatabaseSet
-from .pipeline import DEFAULT_OPTIONS, SolveOptions, solve, solve_rig
+from .pipeline import DEFAULT_OPTIONS, SolveOptions, solve, solve_rig, warm_up
 from .types import Centroids, Solution
 
 
@@ -79,29 +81,101 @@ def solve_frame(frame: Frame, db: NavDatabase | NavDatabaseSet, *, method: str =
     return solve(centroids, camera, db, method=method, options=options)
 
 
-def solve_many(frames: Iterable[Frame], db: NavDatabase | NavDatabaseSet, *, method: str = "auto",
-               options: SolveOptions = DEFAULT_OPTIONS, workers: int | None = None) -> list[Solution]:
-    """Solve many frames; the answers come back in the order of ``frames``.
+@dataclass(frozen=True, slots=True)
+class FrameError:
+    """An item :func:`solve_many` could not parse or solve (with ``return_errors``): the
+    error's text and the field it names, if any (plain data, so it crosses process bounds)."""
+
+    message: str
+    field: str | None = None
+
+
+Item = Frame | Mapping[str, Any] | str | bytes
+"""What :func:`solve_many` takes: a :class:`Frame`, a parsed record, or one JSON Lines line."""
+
+
+def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, method: str = "auto",
+               options: SolveOptions = DEFAULT_OPTIONS, workers: int | None = None,
+               then: Callable[[Any, Solution], Any] | None = None, return_errors: bool = False,
+               pool: str = "process") -> list[Any]:
+    """Solve many frames on all cores; the answers come back in the order of ``frames``.
 
     Parameters
     ----------
-    frames : iterable of Frame
+    frames : iterable of Frame, record (dict) or JSON line (str/bytes)
+        Records and lines are parsed in the workers (:func:`frame_from_record`).
     db : NavDatabase or NavDatabaseSet
-        Opened once by the caller and shared by every thread (it is read-only).
+        Opened once by the caller; warmed up here once, before the workers start, so every
+        worker starts with the compiled kernels and indexes (it is read-only and
+        memory-mapped: worker processes share its pages).
     method : str
     options : SolveOptions
     workers : int, optional
-        Threads to solve on (default: the cores this process may use). 1 solves in the
-        calling thread.
+        Workers to solve on (default: the cores this process may use). 1 solves in the calling
+        thread.
+    then : callable, optional
+        ``then(record, solution)`` runs in the worker and its value is returned instead of the
+        solution (the CLI formats and scores there); ``record`` is the item, parsed if it was a
+        JSON line.
+    return_errors : bool
+        An item whose parse or solve raises ``SkyfixError`` (or ``ValueError``, ``KeyError``,
+        ``TypeError`` from a malformed line) gets a :class:`FrameError` in its place instead of
+        raising.
+    pool : {"process", "thread"}
+        ``"process"`` (POSIX fork): each worker is a forked copy of this process, truly
+        parallel. ``"thread"``: a thread pool; the numba kernels release the GIL, but measured
+        (docs/benchmarks.md, Batch) most of a frame's time is Python around them, so threads
+        gain little.
     """
     todo = list(frames)
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     workers = max(1, min(workers, len(todo) or 1))
+    if not db.__dict__.get("_warm"):
+        warm_up(db)  # once, before any worker exists
+
+    def task(item: Item) -> Any:
+        try:
+            rec = json.loads(item) if isinstance(item, (str, bytes)) else item
+            frame = rec if isinstance(rec, Frame) else frame_from_record(rec)
+            sol = solve_frame(frame, db, method=method, options=options)
+            return sol if then is None else then(rec, sol)
+        except (SkyfixError, ValueError, KeyError, TypeError) as exc:
+            if not return_errors:
+                raise
+            return FrameError(str(exc), getattr(exc, "field", None))
+
     if workers == 1:
-        return [solve_frame(f, db, method=method, options=options) for f in todo]
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(lambda f: solve_frame(f, db, method=method, options=options), todo))
+        return [task(f) for f in todo]
+    if pool == "process" and "fork" in mp.get_all_start_methods():
+        return _fork_map(task, todo, workers)
+    with ThreadPoolExecutor(max_workers=workers) as threads:
+        return list(threads.map(task, todo))
 
 
-__all__ = ["Frame", "frame_from_record", "solve_frame", "solve_many"]
+_JOB: tuple[Callable[[Any], Any], Sequence[Any]] | None = None
+"""The task and items of the running :func:`_fork_map`: forked workers inherit them, so only
+chunk bounds go to a worker and only results come back (nothing else is pickled)."""
+
+
+def _run_chunk(bounds: tuple[int, int]) -> list[Any]:
+    assert _JOB is not None
+    fn, items = _JOB
+    return [fn(item) for item in items[bounds[0]:bounds[1]]]
+
+
+def _fork_map(fn: Callable[[Any], Any], items: Sequence[Any], workers: int) -> list[Any]:
+    """``[fn(x) for x in items]`` on ``workers`` forked processes, in order. Chunks of about
+    1/8 of a worker's share balance slow frames against the cost of a round trip."""
+    global _JOB
+    size = max(16, -(-len(items) // (8 * workers)))
+    bounds = [(lo, min(lo + size, len(items))) for lo in range(0, len(items), size)]
+    _JOB = (fn, items)
+    try:
+        with mp.get_context("fork").Pool(workers) as procs:
+            return [r for chunk in procs.imap(_run_chunk, bounds) for r in chunk]
+    finally:
+        _JOB = None
+
+
+__all__ = ["Frame", "FrameError", "frame_from_record", "solve_frame", "solve_many"]

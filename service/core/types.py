@@ -28,6 +28,23 @@ class SolveStatus(str, enum.Enum):
     NO_SOLUTION = "no_solution"
 
 
+class NoSolutionReason(str, enum.Enum):
+    """Why a solve answered ``no_solution`` (machine-readable; ``Solution.message`` says it in words).
+
+    ``too_few_stars``: fewer than 3 centroids, refused before any method runs.
+    ``camera_outside_database``: no member of the database serves the camera's field, refused
+    before any method runs. ``no_pattern_match``: the methods ran to the end and no catalogue
+    pattern matched the frame's. ``not_proven``: candidates were checked, none was proven beyond
+    the coincidence bound. ``time_limit``: the time limit ended the search first.
+    """
+
+    TOO_FEW_STARS = "too_few_stars"
+    CAMERA_OUTSIDE_DATABASE = "camera_outside_database"
+    NO_PATTERN_MATCH = "no_pattern_match"
+    NOT_PROVEN = "not_proven"
+    TIME_LIMIT = "time_limit"
+
+
 @dataclass(frozen=True, slots=True)
 class Centroids:
     """Star centroids of one camera frame.
@@ -86,6 +103,9 @@ class Solution:
     ``quaternion`` rotates ICRS into the camera frame (or the body frame of a rig), scalar
     first. ``ra_deg``/``dec_deg`` are the boresight (+z) direction; ``roll_deg`` is the position
     angle of image-up (-y) at the boresight, from north through east, in [0, 360).
+    ``method`` is the method that produced the answer (for ``no_solution``: the last one tried,
+    or the requested name if none ran); ``methods_tried`` the methods that actually ran, in order;
+    ``reason`` and ``message`` say why there is no solution (None when solved).
     """
 
     status: SolveStatus
@@ -101,6 +121,9 @@ class Solution:
     timings_ms: dict[str, float] = field(default_factory=dict)
     wcs: dict[str, Any] | None = None
     n_detected: int | None = None
+    reason: NoSolutionReason | None = None
+    methods_tried: tuple[str, ...] = ()
+    message: str | None = None
 
     @property
     def solved(self) -> bool:
@@ -137,6 +160,9 @@ class Solution:
             if self.attitude_sigma_arcsec is None
             else [float(v) for v in self.attitude_sigma_arcsec],
             "method": self.method,
+            "methods_tried": list(self.methods_tried),
+            "reason": None if self.reason is None else self.reason.value,
+            "message": self.message,
             "timings_ms": {k: float(v) for k, v in self.timings_ms.items()},
             **({"wcs": self.wcs} if self.wcs is not None else {}),
             **({"n_detected": self.n_detected} if self.n_detected is not None else {}),

@@ -51,7 +51,22 @@ def test_sim_then_solve_reports_against_truth(small_db: Path, tmp_path: Path) ->
     results = [json.loads(line) for line in proc.stdout.splitlines()]
     assert [r["id"] for r in results] == list(range(40))
     assert sum(r["status"] == "solved" for r in results) >= 38
-    assert "0 wrong" in proc.stderr and "p50" in proc.stderr
+    assert "0 wrong" in proc.stderr and "p50" in proc.stderr and "frames/s" in proc.stderr
+    one = run("solve", str(rec), "--db", str(small_db), "--sigma", "0.5", "--workers", "1")
+    drop = [{k: v for k, v in json.loads(line).items() if k != "timings_ms"} for line in one.stdout.splitlines()]
+    assert drop == [{k: v for k, v in r.items() if k != "timings_ms"} for r in results]  # same answers, in order
+
+
+def test_solve_summary_counts_no_solutions_by_reason(small_db: Path, tmp_path: Path) -> None:
+    rec = tmp_path / "few.jsonl"
+    cam = {"width": 1024, "height": 1024, "fov_deg": 10.0}
+    rows = [{"id": i, "camera": cam, "centroids": [[10.0 * i, 20.0], [300, 40]]} for i in range(3)]
+    rows.append({"id": 3, "camera": {**cam, "fov_deg": 1.0}, "centroids": [[1, 2], [300, 400], [500, 60]]})
+    rec.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    proc = run("solve", str(rec), "--db", str(small_db), "--workers", "2")
+    assert [json.loads(line)["reason"] for line in proc.stdout.splitlines()] == ["too_few_stars"] * 3 + [
+        "camera_outside_database"]
+    assert "no_solution by reason: too_few_stars 3, camera_outside_database 1" in proc.stderr
 
 
 def test_solve_rejects_bad_frames_naming_the_line(small_db: Path, tmp_path: Path) -> None:

@@ -127,3 +127,21 @@ def test_images_over_rest_and_stream(server: ServerProcess) -> None:
     assert rest.status == "solved" and rest.id == "t1" and len(rest.stars) >= 5
     assert streamed.id == "c" and ws.id == "t2" and ws.status == "solved"
     assert ws.quaternion == pytest.approx(rest.quaternion, abs=1e-9)
+
+
+def test_no_solution_reason_reaches_the_client(server: ServerProcess) -> None:
+    cam = {"width": 1024, "height": 768, "fov_deg": 11.4}
+    with Client(server.url) as sky:
+        result = sky.solve([[1, 2], [3, 4]], camera=cam)
+        outside = sky.solve([[1, 2], [300, 400], [500, 60]], camera={**cam, "fov_deg": 1.0})
+    assert result.status == "no_solution" and result.reason == "too_few_stars" and result.methods_tried == []
+    assert outside.reason == "camera_outside_database" and "skyfix db build" in (outside.message or "")
+
+
+def test_reason_values_match_the_engine() -> None:
+    import typing
+
+    from client.models import NoSolutionReason
+    from service.core.types import NoSolutionReason as EngineReason
+
+    assert set(typing.get_args(NoSolutionReason)) == {r.value for r in EngineReason}

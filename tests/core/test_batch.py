@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from service.core.batch import Frame, frame_from_record, solve_frame, solve_many
+from service.core.batch import Frame, FrameError, frame_from_record, solve_frame, solve_many
 from service.core.camera import Camera
 from service.core.errors import InvalidInputError
 from service.core.navdb import NavDatabase
@@ -20,10 +20,11 @@ def _frames(n: int, seed: int) -> list[Frame]:
     return [Frame(((sim.centroids, SEED000_CAMERA, None),), id=i) for i, sim in enumerate(sims)]
 
 
-def test_solve_many_equals_one_by_one_on_threads(seed000_db: NavDatabase) -> None:
+@pytest.mark.parametrize("pool", ["process", "thread"])
+def test_solve_many_equals_one_by_one(seed000_db: NavDatabase, pool: str) -> None:
     frames = _frames(24, 5)
     one_by_one = [solve_frame(f, seed000_db) for f in frames]
-    batched = solve_many(frames, seed000_db, workers=2)
+    batched = solve_many(frames, seed000_db, workers=2, pool=pool)
     assert sum(s.solved for s in one_by_one) >= 20
     for a, b in zip(one_by_one, batched, strict=True):
         assert a.status == b.status
@@ -61,3 +62,21 @@ def test_solve_frame_matches_solve(seed000_db: NavDatabase) -> None:
     cents, cam, _ = frame.views[0]
     a, b = solve_frame(frame, seed000_db), solve(cents, cam, seed000_db)
     assert a.status == b.status and [s.hip for s in a.stars] == [s.hip for s in b.stars]
+
+
+def test_solve_many_parses_lines_in_the_workers_and_returns_errors(seed000_db: NavDatabase) -> None:
+    """JSON lines are parsed and post-processed (``then``) in the forked workers; a bad line
+    gives a FrameError naming the field in its place, the others are answered in order."""
+    import json
+
+    cam = {"width": 1024, "height": 1024, "focal_mm": 94.9489, "pixel_um": 14.0}
+    sims = simulate_frames(SEED000_CAMERA, 40, SimConfig(centroid_noise_px=0.5), rng=8)
+    lines = [json.dumps({"id": i, "camera": cam, "centroids": f.centroids.xy.tolist()}) for i, f in enumerate(sims)]
+    lines[7] = json.dumps({"id": 7, "centroids": [[1, 2]]})  # no camera
+    out = solve_many(lines, seed000_db, workers=2, return_errors=True,
+                     then=lambda rec, sol: (rec["id"], sol.solved, sol.reason))
+    assert isinstance(out[7], FrameError) and out[7].field == "camera"
+    assert [o[0] for i, o in enumerate(out) if i != 7] == [i for i in range(40) if i != 7]
+    assert sum(o[1] for i, o in enumerate(out) if i != 7) >= 36
+    with pytest.raises(InvalidInputError):
+        solve_many(lines[5:9], seed000_db, workers=1)

@@ -8,6 +8,7 @@ from service.core.evaluate import score
 from service.core.methods import method_names
 from service.core.pipeline import solve
 from service.core.sim import SimConfig, random_points, simulate_frames
+from service.core.camera import Camera
 from service.core.types import Centroids
 from tests.conftest import SEED000_CAMERA
 
@@ -116,3 +117,41 @@ def test_missing_stars_magnitude_noise_and_more_false_stars(method: str, seed000
         assert not (s.solved and not s.correct), "wrong answer"
         solved += s.solved
     assert solved >= 0.9 * len(frames)
+
+
+def test_no_solution_says_why_and_what_ran(seed000_db) -> None:
+    """``reason``/``methods_tried``/``message`` (issue 12 item 6): a refused frame runs nothing,
+    a searched one lists what ran, and ``method`` is never a method that did not run."""
+    from service.core.navdb import open_database
+    from service.core.pipeline import SolveOptions
+    from service.core.types import NoSolutionReason
+
+    fresh = open_database(seed000_db.path)  # not warmed: a refusal must not warm it
+    few = solve(Centroids.from_list([[1, 2], [3, 4]]), SEED000_CAMERA, fresh)
+    assert few.reason is NoSolutionReason.TOO_FEW_STARS and few.methods_tried == () and few.method == "auto"
+    tiny = Camera.from_fov(1.5, 1024, 1024)  # the database serves 8.6-12.4 deg
+    pts = random_points(tiny, 12, rng=1)
+    out = solve(pts, tiny, fresh, method="maxangle")
+    assert out.reason is NoSolutionReason.CAMERA_OUTSIDE_DATABASE and out.methods_tried == ()
+    assert "skyfix db build" in out.message and "--fov-min 1.5" in out.message
+    assert not fresh.__dict__.get("_warm"), "refused before warm-up"
+    d = out.to_dict()
+    assert d["reason"] == "camera_outside_database" and d["methods_tried"] == [] and d["message"] == out.message
+
+    late = solve(random_points(SEED000_CAMERA, 20, rng=3), SEED000_CAMERA, seed000_db,
+                 options=SolveOptions(timeout_ms=1e-6))
+    assert late.reason is NoSolutionReason.TIME_LIMIT
+    assert late.methods_tried == ("maxangle",) and late.method == "maxangle"  # was "pyramid"
+
+    reasons = set()
+    for i in range(20):
+        sol = solve(random_points(SEED000_CAMERA, 5 + i, rng=i), SEED000_CAMERA, seed000_db)
+        assert not sol.solved and sol.methods_tried == ("maxangle", "pyramid") and sol.method == "pyramid"
+        reasons.add(sol.reason)
+        assert sol.message and "maxangle, pyramid" in sol.message
+    assert reasons <= {NoSolutionReason.NO_PATTERN_MATCH, NoSolutionReason.NOT_PROVEN} and reasons
+
+    f = simulate_frames(SEED000_CAMERA, 1, SimConfig(centroid_noise_px=0.2), rng=42)[0]
+    good = solve(f.centroids, SEED000_CAMERA, seed000_db)
+    assert good.solved and good.reason is None and good.message is None
+    assert good.methods_tried[-1] == good.method and good.to_dict()["reason"] is None

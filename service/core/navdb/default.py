@@ -22,14 +22,24 @@ DEFAULT_MEMBERS: dict[str, BuildConfig] = {
         fov_min_deg=3.5, fov_max_deg=9.0, mag_limit=7.0, double_star_sep_deg=0.01,
         methods=("maxangle", "pyramid", "triangle"), method_params={"maxangle": {"d_max_deg": 3.5}},
     ),
+    "mid": BuildConfig(
+        fov_min_deg=7.0, fov_max_deg=12.5, mag_limit=6.5, double_star_sep_deg=0.02,
+        density_cap=12, density_radius_deg=4.0, methods=("maxangle", "pyramid"),
+        method_params={"maxangle": {"d_max_deg": 12.5}},
+    ),
     "wide": BuildConfig(
         fov_min_deg=9.0, fov_max_deg=32.0, mag_limit=6.5, double_star_sep_deg=0.02,
         density_cap=12, density_radius_deg=4.0, methods=("maxangle", "pyramid"),
     ),
 }
 """The default database set: a deep (V <= 8, density-capped) member for cameras of 3.5-16.5 deg
-diagonal, a V <= 7 one for 3.5-9 deg, and a bright one for 9-32 deg (the seed-000 camera, the
-real test images, most star trackers and wide-field cameras).
+diagonal, a V <= 7 one for 3.5-9 deg, a bright one for 9-32 deg (the real test images, most star
+trackers and wide-field cameras), and between them ``mid`` (V <= 6.5) for cameras of 7 deg side
+to 12.5 deg diagonal (the seed-000 camera, 8.6 deg), whose ``maxangle`` table holds every
+triangle up to 12.5 deg: the whole field of each camera it serves. (The narrow and wide members'
+``maxangle`` tables hold triangles up to their smallest camera's side; the whole field of their
+largest at their density would cost about 500x and 150x as many triangles.) ``mid`` costs ~15 s
+and ~220 MB of the build (docs/benchmarks.md, Batch).
 
 ``sparse`` is for narrow cameras that see only a few stars: against the deep member, a frame of
 3-4 stars cannot be proven (its many faint stars make any small pattern ambiguous and any lone

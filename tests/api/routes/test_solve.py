@@ -151,3 +151,20 @@ def test_observer_velocity_is_applied_and_checked(client: httpx.Client, frames: 
         r = client.post("/v1/solve", json={**body, "observer_velocity_km_s": bad})
         assert r.status_code == 422, (bad, r.text)
         assert "observer_velocity_km_s" in r.text
+
+
+def test_no_solution_carries_reason_and_methods_tried(client: httpx.Client, camera: Camera) -> None:
+    """Every no_solution names why (machine-readable ``reason``, a human ``message``) and lists
+    the methods that ran; refusals (too few stars, a camera the database cannot serve) run none."""
+    few = client.post("/v1/solve", json={"camera": "tetra3", "centroids": [[1, 2], [30, 40]]}).json()
+    assert few["status"] == "no_solution" and few["reason"] == "too_few_stars", few
+    assert few["methods_tried"] == [] and few["method"] == "auto" and "at least 3" in few["message"]
+    narrow = {"width": 1024, "height": 768, "fov_deg": 2.0}  # the test database serves 7-15 deg
+    pts = random_points(Camera.from_spec(narrow), 10, rng=2)
+    out = client.post("/v1/solve", json={"camera": narrow, "centroids": pts.xy.tolist()}).json()
+    assert out["reason"] == "camera_outside_database" and out["methods_tried"] == [], out
+    assert "skyfix db build" in out["message"] and "--fov-min 1.5" in out["message"]
+    rand = client.post("/v1/solve", json={"camera": "tetra3", "centroids": random_points(camera, 15, rng=3).xy.tolist()})
+    result = SolveResult.model_validate(rand.json())
+    assert result.reason in ("no_pattern_match", "not_proven") and result.methods_tried
+    assert result.method == result.methods_tried[-1]

@@ -156,7 +156,10 @@ def run(args: argparse.Namespace) -> int:
                                                 pdir / "peers", not args.rebuild_peers)
             results["db"] += [r.__dict__ for r in reps]
             results["unavailable"][cam] = failed
-            solvers = [SkyfixSolver(db, m) for m in sky] + ready
+            solvers = [SkyfixSolver(db, m) for m in sky] if "camera" in args.skyfix_db else []
+            if "default" in args.skyfix_db:
+                solvers = [SkyfixSolver(default_set(pdir, args.reuse_db), "auto", label=" @default")] + solvers
+            solvers += ready
             for sweep in sweeps:
                 t0 = time.time()
                 for scen in scenarios(cam, sweep, args.values):
@@ -183,6 +186,20 @@ def run(args: argparse.Namespace) -> int:
     (out / "peers.md").write_text(render(results, args, info, cmd))
     print(f"wrote {out / 'peers.md'}", flush=True)
     return 0
+
+
+def default_set(pdir: Path, reuse: bool) -> Any:
+    """The default database set (what the README's quick start serves), built once per run."""
+    from service.core.navdb.builder import build_database_set
+    from service.core.navdb.default import DEFAULT_MEMBERS
+
+    path = pdir / "default-set"
+    if not (reuse and (path / "manifest.json").is_file() and common.opens(path)):
+        build_database_set(path, DEFAULT_MEMBERS)
+    db = open_database(path)
+    solve_probe = scenarios("seed000", "noise", [0.5])[0].frames(1, 999)[0]
+    SkyfixSolver(db, "auto").solve(solve_probe.centroids, PRESETS["seed000"].camera, 0.5)  # warm the kernels
+    return db
 
 
 def time_ratio(solvers: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -239,7 +256,7 @@ def render(res: dict[str, Any], args: argparse.Namespace, info: dict[str, Any], 
            "Right = attitude within 360\" cross-boresight and 3600\" roll and every matched star the true one "
            "(a false star paired with a catalogue star is wrong). A cell reads: right % / wrong answers "
            "(of which N att = attitude off; the rest have the right attitude but pair some centroid with the "
-           "wrong star) / median ms; [N%] = frames solved with the right attitude, when that differs from the right "
+           "wrong star) / ms median · mean · p99; `@default` = the default database set (the README's path); [N%] = frames solved with the right attitude, when that differs from the right "
            "rate because of wrong star pairs.", ""]
     if res["db"]:
         out += ["### Databases", ""]
@@ -266,7 +283,7 @@ def render(res: dict[str, Any], args: argparse.Namespace, info: dict[str, Any], 
                     w = f"{s['wrong']}" + (f" ({s['wrong_attitude']} att)" if s["wrong"] else "")
                     att = (s["solved"] - s["wrong_attitude"]) / s["frames"]
                     rate = fmt(s["rate"], 1, True) + (f" [{fmt(att, 1, True)}]" if s["wrong"] > s["wrong_attitude"] else "")
-                    cells.append(f"{rate} / {w} / {fmt(s['ms_median'])}")
+                    cells.append(f"{rate} / {w} / {fmt(s['ms_median'])} · {fmt(s['ms_mean'])} · {fmt(s['ms_p99'])}")
                 if sk:
                     ra = r["ratio"]
                     cells.append(f"{fmt(ra.get(sk[0]))} ({ra.get('fastest_peer', '-')})" if ra else "-")
@@ -377,6 +394,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--skyfix", default="auto," + ",".join(method_names()),
                     help="skyfix methods to run (auto first: it is the one the goals compare)")
     ap.add_argument("--peers", default="tetra3rs,tetra3rs-0.002,cedar")
+    ap.add_argument("--skyfix-db", default="default,camera",
+                    help="skyfix's databases: default (the default set, as the README serves it, with auto), "
+                         "camera (one built for each camera), comma-separated")
     ap.add_argument("--no-real", dest="real", action="store_false", help="skip the real images")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--db-dir", default=str(OUT / "db"))
@@ -387,6 +407,7 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     a = ap.parse_args(argv)
     a.camera, a.sweep = a.camera.split(","), a.sweep.split(",")
     a.skyfix, a.peers = a.skyfix.split(","), a.peers.split(",")
+    a.skyfix_db = a.skyfix_db.split(",")
     a.values = [float(v) for v in a.values.split(",")] if a.values else None
     for c in a.camera:
         if c not in ("all", "none") and c not in PRESETS:

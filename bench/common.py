@@ -202,6 +202,7 @@ def summarize(js: Sequence[Judged]) -> dict[str, Any]:
         "roll_arcsec_median": _pct([j.roll_arcsec for j in right], 50),
         "ms_median": _pct(ms, 50),
         "ms_p95": _pct(ms, 95),
+        "ms_p99": _pct(ms, 99),
         "ms_mean": float(np.mean(ms)) if ms else None,
         "ms_median_failed": _pct([j.ms for j in js if not j.solved], 50),
     }
@@ -214,9 +215,9 @@ class SkyfixSolver:
     kind = "skyfix"
 
     def __init__(self, db: Any, method: str, *, sigma: Callable[[float], float] | float = matched_sigma,
-                 timeout_ms: float = TIMEOUT_MS) -> None:
+                 timeout_ms: float = TIMEOUT_MS, label: str = "") -> None:
         self.db, self.method, self.sigma, self.timeout_ms = db, method, sigma, timeout_ms
-        self.name = f"skyfix {method}"
+        self.name = f"skyfix {method}{label}"
         self._opts: dict[float, SolveOptions] = {}
 
     def options(self, noise_px: float) -> SolveOptions:

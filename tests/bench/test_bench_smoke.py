@@ -71,8 +71,8 @@ def test_bench_methods_smoke(tmp_path: Path, maxangle_db: Path) -> None:
 def test_bench_peers_smoke(tmp_path: Path) -> None:
     pytest.importorskip("tetra3rs")
     rc = bench_peers.main(["--camera", "seed000", "--sweep", "false", "--values", "1", "--frames", "3",
-                           "--skyfix", "maxangle", "--peers", "tetra3rs,tetra3rs-0.002", "--no-real", "--no-plot",
-                           "--out", str(tmp_path), "--db-dir", str(tmp_path / "db")])
+                           "--skyfix", "maxangle", "--skyfix-db", "camera", "--peers", "tetra3rs,tetra3rs-0.002",
+                           "--no-real", "--no-plot", "--out", str(tmp_path), "--db-dir", str(tmp_path / "db")])
     assert rc == 0
     data = json.loads((tmp_path / "peers.json").read_text())
     (row,) = data["sweeps"]

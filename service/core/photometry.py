@@ -11,7 +11,6 @@ fainter than predicted is ordinary (saturation, a blend split by the catalogue, 
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import theilslopes
 
 from .types import FloatArray
 
@@ -19,6 +18,19 @@ THRESHOLD_MAG = 2.0
 """Least excess brightness (magnitudes) that refuses a pair."""
 MIN_PAIRS = 6
 """Fewer pairs than this are not tested (the fit would rest on the pair it judges)."""
+
+
+def theil_sen(x: FloatArray, y: FloatArray) -> tuple[float, float]:
+    """Theil-Sen line ``y = intercept + slope x``: the median of the pairwise slopes, then the
+    intercept of the medians (what ``scipy.stats.theilslopes`` returns, ~100x faster for a few dozen
+    points since it skips the confidence interval)."""
+    i, j = np.triu_indices(len(x), k=1)
+    dx = x[j] - x[i]
+    keep = dx != 0
+    if not keep.any():
+        return float("nan"), float("nan")
+    slope = float(np.median((y[j] - y[i])[keep] / dx[keep]))
+    return slope, float(np.median(y) - slope * np.median(x))
 
 
 def too_bright(flux: FloatArray, cat_mag: FloatArray, *, threshold_mag: float = THRESHOLD_MAG,
@@ -32,7 +44,7 @@ def too_bright(flux: FloatArray, cat_mag: FloatArray, *, threshold_mag: float = 
     if ok.sum() < min_pairs or np.ptp(mag[ok]) < 0.5:
         return out
     inst = -2.5 * np.log10(flux[ok])
-    slope, intercept, _, _ = theilslopes(inst, mag[ok])
+    slope, intercept = theil_sen(mag[ok], inst)
     if not np.isfinite(slope) or slope <= 0:
         return out  # no usable brightness information (e.g. fluxes that are only a rank)
     resid = inst - (intercept + slope * mag[ok])  # negative: brighter than predicted

@@ -57,3 +57,17 @@ def test_beyond_completeness_needs_most_brighter_stars_unseen() -> None:
     partly = np.ones(len(field), bool)
     partly[6:10] = False
     assert not beyond_completeness(pairs, field, partly).any()
+
+
+def test_theil_sen_matches_scipy() -> None:
+    from scipy.stats import theilslopes
+
+    from service.core.photometry import theil_sen
+
+    rng = np.random.default_rng(4)
+    x = rng.uniform(2, 7, 25)
+    y = 1.0 * x - 13.3 + rng.normal(0, 0.3, 25)
+    y[3] -= 4  # an outlier the fit ignores
+    slope, intercept = theil_sen(x, y)
+    ref = theilslopes(y, x)
+    assert slope == pytest.approx(ref.slope) and intercept == pytest.approx(ref.intercept)

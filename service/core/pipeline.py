@@ -148,8 +148,9 @@ def solve_rig(
         sigmas.append(options.centroid_sigma_px * options.retry_sigma_factor)
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
     # the coincidence bound is multiplied by
+    plan = _plan(members, method_lists)
     for sigma in sigmas:
-        for member, methods in zip(members, method_lists, strict=True):
+        for member, methods in plan:
             db = member
             found, used, trials = _identify(obs, db, methods, sigma, options, deadline, hint, trials, tried)
             if found is not None or time.perf_counter() > deadline:
@@ -171,6 +172,16 @@ def solve_rig(
     timings["total"] = (time.perf_counter() - t0) * 1e3
     object.__setattr__(sol, "timings_ms", timings)
     return sol
+
+
+def _plan(members: list[NavDatabase], method_lists: list[list[str]]) -> list[tuple[NavDatabase, list[str]]]:
+    """The order of the search over a database set: every member's first method (the fast
+    pass) before any member's fallbacks, so a frame that the first method of the second member
+    solves does not wait for the first member's slow fallbacks, and a frame no one solves
+    spends its fallback time only once the fast passes have all failed."""
+    first = [(m, ms[:1]) for m, ms in zip(members, method_lists, strict=True) if ms]
+    rest = [(m, ms[1:]) for m, ms in zip(members, method_lists, strict=True) if len(ms) > 1]
+    return first + rest
 
 
 def _refine(

@@ -1,4 +1,4 @@
-"""The ``skyfix`` command: serve, db, solve, solve-image, sim, replay, calibrate."""
+"""The ``skyfix`` command: serve, db, solve, solve-image, sim, replay, calibrate, reprocess."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from client.cli import replay
 
 from . import db
 from .calibrate import calibrate_camera
+from .reprocess import reprocess_recordings
 from .serve import serve
 from .sim import sim
 from .solve import solve_frames
@@ -22,6 +23,7 @@ app.command("sim")(sim)
 app.command("solve-image")(solve_image_files)
 app.command("replay")(replay)
 app.command("calibrate")(calibrate_camera)
+app.command("reprocess")(reprocess_recordings)
 
 
 def main() -> None:

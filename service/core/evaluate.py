@@ -68,3 +68,20 @@ def score(solution: Solution, truth_quaternion: Sequence[float] | None,
     else:
         correct = cross is None or cross <= WRONG_BORESIGHT_ARCSEC
     return Score(True, correct, wrong, cross, roll)
+
+
+def correct_against_record(rec: Mapping[str, object], sol: Solution) -> bool | None:
+    """Whether a solved frame agrees with its recording's ``truth`` (the README's JSON Lines
+    format; a rig's truth lists every camera's HIPs one camera after the other). None when the
+    frame is not solved or the record holds no truth."""
+    truth = rec.get("truth") or {}
+    if not sol.solved or not isinstance(truth, Mapping) or not truth:
+        return None
+    blends = {int(k): v for k, v in (truth.get("blends") or {}).items()}  # type: ignore[union-attr]
+    cams = rec.get("cameras")
+    sizes = [len(c.get("centroids", [])) for c in cams] if isinstance(cams, list) and cams else [0]
+    hips = truth.get("hip")
+    offsets = np.cumsum([0, *sizes[:-1]]).tolist()
+    return all(score(sol, truth.get("quaternion"), None if hips is None else hips[o:],  # type: ignore[arg-type,index]
+                     camera=c, blends={k - o: v for k, v in blends.items() if k >= o}).correct
+               for c, o in enumerate(offsets))

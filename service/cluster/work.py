@@ -1,0 +1,113 @@
+"""What runs on a Dask worker: the database opened once per worker (a worker plugin), and the
+solve of one partition into its output file."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from distributed import WorkerPlugin, get_worker
+
+from .partition import Partition, read_lines
+
+PLUGIN_NAME = "skyfix-database"
+
+
+def database_checksum(path: Path) -> str:
+    """A checksum of a database (or set) by its arrays' sha256s: equal for databases built
+    identically, whatever their build time."""
+    h = hashlib.sha256()
+    for mpath in sorted(Path(path).resolve().glob("**/manifest.json")):
+        manifest = json.loads(mpath.read_text())
+        for name, spec in sorted((manifest.get("arrays") or {}).items()):
+            h.update(f"{mpath.parent.name}/{name}:{spec.get('sha256')}\n".encode())
+    return h.hexdigest()
+
+
+class DatabasePlugin(WorkerPlugin):
+    """Opens the navigation database once per worker process and checks it is the client's.
+
+    ``path`` None means the default database, which each worker builds identically on first
+    use (in its own ``SKYFIX_DB_DIR``). A worker that cannot open it, or opens a different one,
+    keeps the reason; its tasks fail with it (naming the worker and the path)."""
+
+    name = PLUGIN_NAME
+
+    def __init__(self, path: str | None, checksum: str) -> None:
+        self.path, self.checksum = path, checksum
+
+    def setup(self, worker: Any) -> None:
+        from service.core.navdb import ensure_default_database, open_database
+        from service.core.pipeline import warm_up
+
+        where = self.path or "the default database"
+        try:
+            path = Path(self.path) if self.path else ensure_default_database()
+            where = str(path)
+            db = open_database(path)
+            got = database_checksum(path)
+            if got != self.checksum:
+                raise RuntimeError(f"its checksum {got[:12]} differs from the client's {self.checksum[:12]}")
+            warm_up(db)
+        except Exception as exc:  # kept and raised by every task on this worker
+            worker.skyfix_db_error = f"worker {worker.address}: cannot use the navigation database at {where}: {exc}"
+            return
+        worker.skyfix_db = db
+
+
+def _worker_db() -> Any:
+    worker = get_worker()
+    db = getattr(worker, "skyfix_db", None)
+    if db is None:
+        raise RuntimeError(getattr(worker, "skyfix_db_error", f"worker {worker.address}: no database plugin"))
+    return db
+
+
+def solve_partition(part: dict[str, Any], out_dir: str, method: str, sigma: float) -> dict[str, Any]:
+    """Solve one partition on this worker; write its results (one JSON line per frame, an error
+    record for a frame that cannot be parsed or solved) atomically to ``out_dir``; return its
+    counts, the output's sha256 and the frames' solve times (ms)."""
+    from service.core.batch import FrameError, solve_many
+    from service.core.evaluate import correct_against_record
+    from service.core.pipeline import SolveOptions
+
+    p = Partition(**part)
+    db = _worker_db()
+    numbered = [(p.first_line + i, line) for i, line in enumerate(read_lines(p)) if line.strip()]
+
+    def answer(rec: Any, sol: Any) -> tuple[str, bool, bool | None, float]:
+        return (json.dumps(sol.to_dict(rec.get("id"))), sol.solved, correct_against_record(rec, sol),
+                sol.timings_ms.get("total", 0.0))
+
+    results = solve_many([line for _, line in numbered], db, method=method,
+                         options=SolveOptions(centroid_sigma_px=sigma), workers=1, then=answer, return_errors=True)
+    out, ms = [], []
+    solved = wrong = checked = errors = 0
+    for (lineno, _), res in zip(numbered, results, strict=True):
+        if isinstance(res, FrameError):
+            errors += 1
+            out.append(json.dumps({"status": "error", "file": p.path, "line": lineno, "error": res.message,
+                                   "field": res.field}))
+            continue
+        text, ok, correct, t = res
+        out.append(text)
+        solved += ok
+        ms.append(t)
+        if correct is not None:
+            checked += 1
+            wrong += not correct
+    data = ("\n".join(out) + "\n").encode() if out else b""
+    target = Path(out_dir) / p.output_name
+    fd, tmp = tempfile.mkstemp(dir=out_dir, prefix=f".{p.output_name}.", suffix=".tmp")
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, target)
+    return {"index": p.index, "key": p.key, "output": p.output_name, "sha256": hashlib.sha256(data).hexdigest(),
+            "frames": len(numbered), "solved": solved, "no_solution": len(numbered) - solved - errors,
+            "errors": errors, "wrong": wrong, "checked": checked, "ms": ms, "worker": get_worker().address}

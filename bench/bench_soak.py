@@ -127,7 +127,7 @@ async def _stream(url: str, payloads: list[bytes], rate: float, t_end: float, so
         sender = asyncio.create_task(send())
         while not sender.done() or len(sent_at):
             try:
-                msg = json.loads(await asyncio.wait_for(ws.recv(), timeout=10))
+                msg = json.loads(await asyncio.wait_for(ws.recv(), timeout=60))
             except TimeoutError:
                 if sender.done():
                     break

@@ -81,7 +81,10 @@ def test_request_ids_and_one_json_line_per_request_and_frame(pair: Served, good:
         ws.send("not json")
         answers = [json.loads(ws.recv(timeout=30)) for _ in range(4)]
     assert [a.get("status") for a in answers] == ["solved"] * 3 + [None]
-    time.sleep(0.3)
+    deadline = time.monotonic() + 10  # a line is written just after its answer is sent
+    while sum(ln.get("request_id") in ("rel-rest-1", "rel-ws-1") for ln in pair.log_lines()) < 6:
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
     lines = pair.log_lines()
     rest = [ln for ln in lines if ln.get("request_id") == "rel-rest-1"]
     assert len(rest) == 1 and rest[0]["route"] == "/v1/info" and rest[0]["status"] == 200 and rest[0]["ms"] > 0

@@ -109,11 +109,11 @@ def group_rss_bytes(pgid: int) -> int:
 
 
 async def _stream(url: str, payloads: list[bytes], rate: float, t_end: float, soak: Soak,
-                  lat: list[tuple[float, float]]) -> None:
+                  lat: list[tuple[float, float]], offset_s: float = 0.0) -> None:
     sent_at: dict[int, float] = {}
     async with connect(url, max_size=2**24) as ws:
         async def send() -> None:
-            t0 = time.monotonic()
+            t0 = time.monotonic() + offset_s
             k = 0
             while (due := t0 + k / rate) < t_end:
                 await asyncio.sleep(max(0.0, due - time.monotonic()))
@@ -127,7 +127,7 @@ async def _stream(url: str, payloads: list[bytes], rate: float, t_end: float, so
         sender = asyncio.create_task(send())
         while not sender.done() or len(sent_at):
             try:
-                msg = json.loads(await asyncio.wait_for(ws.recv(), timeout=10))
+                msg = json.loads(await asyncio.wait_for(ws.recv(), timeout=60))
             except TimeoutError:
                 if sender.done():
                     break
@@ -198,7 +198,8 @@ async def soak_run(url: str, pgid: int, *, seconds: float, rate: float = 300.0, 
     rest_lat: list[tuple[float, float]] = []
     t_start = time.monotonic()
     t_end = t_start + seconds
-    tasks = [_stream(ws_url, payloads, rate / streams, t_end, soak, ws_lat) for _ in range(streams)]
+    tasks = [_stream(ws_url, payloads, rate / streams, t_end, soak, ws_lat, offset_s=j / rate)
+             for j in range(streams)]  # staggered: the streams' frames together are evenly spaced
     results = await asyncio.gather(*tasks, _rest(url, payloads, rest_rate, t_end, soak, rest_lat),
                                    _sample(pgid, t_start, t_end, soak), return_exceptions=True)
     soak.errors += sum(isinstance(r, BaseException) for r in results)

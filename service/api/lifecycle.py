@@ -8,7 +8,8 @@ already open are not touched. ``/v1/health`` and ``/metrics`` are never refused 
 need them most when the server is full).
 
 Drain (SIGTERM, or a rolling restart): ``DrainingServer`` (a ``uvicorn.Server``) does not
-stop at once on the first SIGTERM/SIGINT. It tells every ``Lifecycle`` to drain: each stream
+stop at once on the first SIGTERM/SIGINT. It stops accepting connections (the other workers
+take them) and tells every ``Lifecycle`` to drain: each stream
 stops reading, answers the frames it has read, and closes with 1001 (going away); new streams
 are closed with 1001 at once; REST keeps being served. When no stream is left (or after
 ``drain_timeout_s``) uvicorn's own shutdown runs, which lets REST requests in flight finish.
@@ -30,6 +31,9 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from .metrics import Metrics
 
 EXEMPT_PATHS = frozenset({"/v1/health", "/metrics"})
+ACCEPT_GRACE_S = 0.5
+"""After a draining worker stops accepting, time for requests on connections it has just
+accepted to arrive (uvicorn's shutdown closes connections that have sent no request yet)."""
 CLOSE_GOING_AWAY = 1001
 CLOSE_TRY_AGAIN_LATER = 1013
 _LIVE: weakref.WeakSet[Lifecycle] = weakref.WeakSet()
@@ -126,6 +130,7 @@ class DrainingServer(uvicorn.Server):
         self.drain_timeout_s = drain_timeout_s
         self._drain_asked = False
         self._deadline: float | None = None
+        self._grace_end = 0.0
         self._apps: list[Lifecycle] = []
 
     def handle_exit(self, sig: int, frame: FrameType | None) -> None:
@@ -141,9 +146,14 @@ class DrainingServer(uvicorn.Server):
 
     async def on_tick(self, counter: int) -> bool:
         if self._drain_asked and not self.should_exit:
+            now = time.monotonic()
             if self._deadline is None:
-                self._deadline = time.monotonic() + self.drain_timeout_s
+                self._deadline = now + self.drain_timeout_s
+                self._grace_end = now + ACCEPT_GRACE_S
+                for server in self.servers:  # stop accepting: other workers take new connections
+                    server.close()
                 self._apps = drain_all()
-            if all(lc.streams == 0 for lc in self._apps) or time.monotonic() > self._deadline:
+            streams_done = all(lc.streams == 0 for lc in self._apps)
+            if (streams_done and now >= self._grace_end) or now > self._deadline:
                 self.should_exit = True
         return await super().on_tick(counter)

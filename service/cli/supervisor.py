@@ -27,7 +27,7 @@ import socket
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -74,7 +74,6 @@ class Worker:
     process: Any
     ready_conn: Connection
     ready: bool = False
-    started: float = field(default_factory=time.monotonic)
 
     @property
     def pid(self) -> int | None:
@@ -197,7 +196,10 @@ def _stop(workers: list[Worker], timeout_s: float) -> None:
     """SIGTERM (drain) each live worker, wait up to ``timeout_s``, then SIGKILL what is left."""
     for w in workers:
         if w.process.is_alive():
-            os.kill(w.pid, signal.SIGTERM)
+            try:
+                os.kill(w.pid, signal.SIGTERM)
+            except ProcessLookupError:  # it died just now
+                pass
     deadline = time.monotonic() + timeout_s
     for w in workers:
         w.process.join(max(0.0, deadline - time.monotonic()))

@@ -111,7 +111,7 @@ def test_slowloris_headers_are_cut_off(small: Served) -> None:
         for answer, sent, seconds in (slow.result(), silent.result(), second.result()):
             assert answer.startswith(b"HTTP/1.1 408 "), answer
             assert json.loads(answer.split(b"\r\n\r\n", 1)[1])["field"] == "headers"
-            assert sent < len(request) and seconds < 4
+            assert sent < len(request) and seconds < 8  # 1 s, with room for a busy machine
 
 
 def wait_idle(served: Served, timeout_s: float = 15) -> None:

@@ -81,7 +81,10 @@ def test_request_ids_and_one_json_line_per_request_and_frame(pair: Served, good:
         ws.send("not json")
         answers = [json.loads(ws.recv(timeout=30)) for _ in range(4)]
     assert [a.get("status") for a in answers] == ["solved"] * 3 + [None]
-    time.sleep(0.3)
+    deadline = time.monotonic() + 10  # a line is written just after its answer is sent
+    while sum(ln.get("request_id") in ("rel-rest-1", "rel-ws-1") for ln in pair.log_lines()) < 6:
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
     lines = pair.log_lines()
     rest = [ln for ln in lines if ln.get("request_id") == "rel-rest-1"]
     assert len(rest) == 1 and rest[0]["route"] == "/v1/info" and rest[0]["status"] == 200 and rest[0]["ms"] > 0
@@ -95,7 +98,7 @@ def test_metrics_totals_are_exact_across_workers_and_survive_a_killed_worker(pai
     before = metric(httpx.get(pair.url + "/metrics").text, "skyfix_http_requests_total", route="/v1/info")
     pids = set()
     n = 0
-    while n < 40 or (len(pids) < 2 and n < 400):  # a new connection each: the kernel spreads them
+    while n < 20 or (len(pids) < 2 and n < 400):  # a new connection each: the kernel spreads them
         with httpx.Client(base_url=pair.url, limits=httpx.Limits(max_keepalive_connections=0)) as c:
             assert c.get("/v1/info").status_code == 200
             pids.add(c.get("/v1/health").json()["pid"])
@@ -130,8 +133,8 @@ def replay(served: Served, frames: list[SimFrame], fault: signal.Signals, after:
 @pytest.mark.parametrize("fault", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
 def test_a_worker_killed_or_drained_mid_stream_loses_no_frame(pair: Served, good: list[SimFrame],
                                                              fault: signal.Signals) -> None:
-    frames = (good * 3)[:150]
-    results, victim = replay(pair, frames, fault, after=60)
+    frames = (good * 3)[:100]
+    results, victim = replay(pair, frames, fault, after=40)
     ids = Counter(int(r.id) for r in results)
     assert sorted(ids) == list(range(len(frames))) and set(ids.values()) == {1}  # each exactly once
     for r in results:
@@ -142,7 +145,7 @@ def test_a_worker_killed_or_drained_mid_stream_loses_no_frame(pair: Served, good
 def test_database_rebuilt_while_serving_workers_move_on_sighup(pair: Served, db_link: Path,
                                                               good: list[SimFrame]) -> None:
     old = {httpx.get(pair.url + "/v1/health").json()["n_stars"]}
-    statuses: Counter[int] = Counter()
+    statuses: Counter[int | str] = Counter()
     seen: Counter[int] = Counter()
     stop = threading.Event()
 
@@ -150,10 +153,14 @@ def test_database_rebuilt_while_serving_workers_move_on_sighup(pair: Served, db_
         with httpx.Client(base_url=pair.url, timeout=30, limits=httpx.Limits(max_keepalive_connections=0)) as c:
             i = 0
             while not stop.is_set():
-                r = c.post("/v1/solve", json={"camera": "tetra3", "centroids": rows(good[i % len(good)])})
-                statuses[r.status_code] += 1
-                h = c.get("/v1/health")
-                statuses[h.status_code] += 1
+                try:
+                    r = c.post("/v1/solve", json={"camera": "tetra3", "centroids": rows(good[i % len(good)])})
+                    statuses[r.status_code] += 1
+                    h = c.get("/v1/health")
+                    statuses[h.status_code] += 1
+                except httpx.HTTPError as exc:  # counted: the test fails on any
+                    statuses[type(exc).__name__] += 1
+                    continue
                 if h.status_code == 200:
                     seen[h.json()["n_stars"]] += 1
                 i += 1
@@ -167,7 +174,7 @@ def test_database_rebuilt_while_serving_workers_move_on_sighup(pair: Served, db_
     os.kill(pair.proc.pid, signal.SIGHUP)
     deadline = time.monotonic() + 90
     while not (len(seen) == 2 and all_new(pair, old)):
-        assert time.monotonic() < deadline and runner.is_alive()
+        assert time.monotonic() < deadline, (seen, statuses)
         time.sleep(0.2)
     stop.set()
     runner.join(timeout=30)

@@ -36,6 +36,8 @@ def test_metrics_count_requests_and_solves(client: httpx.Client, frames: list[Si
     solved = sum(sample(after, "skyfix_solves_total", method=m, outcome="solved") -
                  sample(before, "skyfix_solves_total", method=m, outcome="solved") for m in ("pyramid", "maxangle"))
     assert solved == 3
+    outcomes = [ln for ln in after.splitlines() if ln.startswith("skyfix_solves_total{")]
+    assert outcomes and all('reason="' in ln for ln in outcomes)  # the outcome when the engine gives none
     assert sample(after, "skyfix_solve_seconds_count") - sample(before, "skyfix_solve_seconds_count") == 4
     assert sample(after, "skyfix_solve_seconds_bucket", le="+Inf") == sample(after, "skyfix_solve_seconds_count")
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from collections import Counter
@@ -11,6 +10,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
+import orjson
 import typer
 
 from ._progress import err_console, resolve_db
@@ -101,4 +101,5 @@ def _answer(rec: dict[str, Any], sol: Any) -> tuple[str, bool, str | None, bool 
                             camera=c, blends={k - o: v for k, v in blends.items() if k >= o}).correct
                       for c, o in enumerate(np.cumsum([0, *sizes[:-1]]).tolist()))
     reason = None if sol.reason is None else sol.reason.value
-    return json.dumps(sol.to_dict(rec.get("id"))), sol.solved, reason, correct, sol.timings_ms.get("total", 0.0)
+    text = orjson.dumps(sol.to_dict(rec.get("id"))).decode()
+    return text, sol.solved, reason, correct, sol.timings_ms.get("total", 0.0)

@@ -6,13 +6,14 @@ This is the batch path of the engine, for ground processing of recordings (``sky
 
 from __future__ import annotations
 
-import json
 import multiprocessing as mp
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
+
+import orjson
 
 from .camera import Camera
 from .errors import InvalidInputError, SkyfixError
@@ -118,6 +119,7 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
         solution (the CLI formats and scores there); ``record`` is the item, parsed if it was a
         JSON line.
     return_errors : bool
+        JSON lines are parsed with orjson (strict JSON: no NaN or Infinity literals).
         An item whose parse or solve raises ``SkyfixError`` (or ``ValueError``, ``KeyError``,
         ``TypeError`` from a malformed line) gets a :class:`FrameError` in its place instead of
         raising.
@@ -136,7 +138,7 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
 
     def task(item: Item) -> Any:
         try:
-            rec = json.loads(item) if isinstance(item, (str, bytes)) else item
+            rec = orjson.loads(item) if isinstance(item, (str, bytes)) else item
             frame = rec if isinstance(rec, Frame) else frame_from_record(rec)
             sol = solve_frame(frame, db, method=method, options=options)
             return sol if then is None else then(rec, sol)

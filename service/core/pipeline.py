@@ -239,21 +239,23 @@ def _refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavDatabase
     if n < 3:
         return _refused(NoSolutionReason.TOO_FEW_STARS, method, t0,
                         f"{n} star(s) given; identification needs at least 3")
-    widest = max((cam for _, cam, _ in frames), key=lambda c: c.diagonal_fov_deg)
+    diagonal = max(cam.diagonal_fov_deg for _, cam, _ in frames)
     narrowest = min(min(cam.fov_deg, cam.fov_y_deg) for _, cam, _ in frames)
-    members = list(db.members.values()) if isinstance(db, NavDatabaseSet) else [db]
-    ranges = [(float(m.manifest["fov_min_deg"]), float(m.manifest["fov_max_deg"])) for m in members]
-    if any(narrowest >= lo / OUTSIDE_FACTOR and widest.diagonal_fov_deg <= hi * OUTSIDE_FACTOR
-           for lo, hi in ranges):
+    ranges = db.__dict__.get("_fov_ranges")
+    if ranges is None:  # once per opened database
+        members = list(db.members.values()) if isinstance(db, NavDatabaseSet) else [db]
+        ranges = [(float(m.manifest["fov_min_deg"]), float(m.manifest["fov_max_deg"])) for m in members]
+        db.__dict__["_fov_ranges"] = ranges
+    if any(narrowest >= lo / OUTSIDE_FACTOR and diagonal <= hi * OUTSIDE_FACTOR for lo, hi in ranges):
         return None
     served = ", ".join(f"{lo:g}-{hi:g}" for lo, hi in ranges)
     mag = min(max(6.5 + math.log10((8.6 / max(narrowest, 0.1)) ** 2) / 0.45, 4.5), 9.0)
     return _refused(
         NoSolutionReason.CAMERA_OUTSIDE_DATABASE, method, t0,
-        f"camera of {narrowest:.3g} deg side and {widest.diagonal_fov_deg:.3g} deg diagonal is outside the "
+        f"camera of {narrowest:.3g} deg side and {diagonal:.3g} deg diagonal is outside the "
         f"database's range (side >= fov_min, diagonal <= fov_max: {served} deg); a database that serves it: "
         f"skyfix db build --out db/camera --fov-min {math.floor(narrowest * 10) / 10:g} "
-        f"--fov-max {math.ceil(widest.diagonal_fov_deg * 10 + 2) / 10:g} --mag-limit {mag:.1f}")
+        f"--fov-max {math.ceil(diagonal * 10 + 2) / 10:g} --mag-limit {mag:.1f}")
 
 
 def _refused(reason: NoSolutionReason, method: str, t0: float, message: str) -> Solution:

@@ -75,7 +75,8 @@ def solve_frames(
     why = ", ".join(f"{k} {v}" for k, v in reasons.most_common())
     err_console.print(
         f"{solved}/{n} identified ({100 * solved / max(n, 1):.1f}%), {wrong} wrong of {checked} with truth; "
-        f"solve ms p50 {np.percentile(t, 50):.2f} p95 {np.percentile(t, 95):.2f} p99 {np.percentile(t, 99):.2f}; "
+        f"solve ms p50 {np.percentile(t, 50):.2f} p95 {np.percentile(t, 95):.2f} "
+        f"p99 {np.percentile(t, 99):.2f}; "
         f"{n / max(wall, 1e-9):.0f} frames/s on {workers or _cores()} worker(s)"
         + (f"; no_solution by reason: {why}" if why else "")
     )

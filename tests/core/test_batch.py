@@ -71,7 +71,8 @@ def test_solve_many_parses_lines_in_the_workers_and_returns_errors(seed000_db: N
 
     cam = {"width": 1024, "height": 1024, "focal_mm": 94.9489, "pixel_um": 14.0}
     sims = simulate_frames(SEED000_CAMERA, 40, SimConfig(centroid_noise_px=0.5), rng=8)
-    lines = [json.dumps({"id": i, "camera": cam, "centroids": f.centroids.xy.tolist()}) for i, f in enumerate(sims)]
+    lines = [json.dumps({"id": i, "camera": cam, "centroids": f.centroids.xy.tolist()})
+             for i, f in enumerate(sims)]
     lines[7] = json.dumps({"id": 7, "centroids": [[1, 2]]})  # no camera
     out = solve_many(lines, seed000_db, workers=2, return_errors=True,
                      then=lambda rec, sol: (rec["id"], sol.solved, sol.reason))

@@ -78,7 +78,7 @@ def pattern_stars(stars: StarTable, params: dict[str, Any]) -> np.ndarray:
     if "pattern_cap" in params and len(rows):
         radius = chord_from_angle(math.radians(float(params.get("pattern_radius_deg", 5.0))))
         pairs = cKDTree(stars.vec[rows]).query_pairs(float(radius), output_type="ndarray")
-        brighter = np.bincount(pairs.max(axis=1), minlength=len(rows)) if len(pairs) else np.zeros(len(rows), int)
+        brighter = np.bincount(pairs.max(axis=1), minlength=len(rows)) if len(pairs) else np.zeros(len(rows))
         rows = rows[brighter < int(params["pattern_cap"])]
     return rows.astype(np.int64)
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import pickle
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -160,10 +161,24 @@ _JOB: tuple[Callable[[Any], Any], Sequence[Any]] | None = None
 chunk bounds go to a worker and only results come back (nothing else is pickled)."""
 
 
-def _run_chunk(bounds: tuple[int, int]) -> list[Any]:
+@dataclass(frozen=True)
+class _Raised:
+    """An exception raised in a forked worker, carried back to be raised in the caller."""
+
+    error: BaseException
+
+
+def _run_chunk(bounds: tuple[int, int]) -> list[Any] | _Raised:
     assert _JOB is not None
     fn, items = _JOB
-    return [fn(item) for item in items[bounds[0]:bounds[1]]]
+    try:
+        return [fn(item) for item in items[bounds[0]:bounds[1]]]
+    except Exception as exc:  # noqa: BLE001 - re-raised in the caller
+        try:
+            pickle.loads(pickle.dumps(exc))
+        except Exception:  # noqa: BLE001 - an exception that cannot cross processes
+            exc = RuntimeError(f"{type(exc).__name__}: {exc}")
+        return _Raised(exc)
 
 
 def _fork_map(fn: Callable[[Any], Any], items: Sequence[Any], workers: int) -> list[Any]:
@@ -174,8 +189,13 @@ def _fork_map(fn: Callable[[Any], Any], items: Sequence[Any], workers: int) -> l
     bounds = [(lo, min(lo + size, len(items))) for lo in range(0, len(items), size)]
     _JOB = (fn, items)
     try:
+        out: list[Any] = []
         with mp.get_context("fork").Pool(workers) as procs:
-            return [r for chunk in procs.imap(_run_chunk, bounds) for r in chunk]
+            for chunk in procs.imap(_run_chunk, bounds):
+                if isinstance(chunk, _Raised):
+                    raise chunk.error
+                out.extend(chunk)
+        return out
     finally:
         _JOB = None
 

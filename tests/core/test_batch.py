@@ -79,5 +79,6 @@ def test_solve_many_parses_lines_in_the_workers_and_returns_errors(seed000_db: N
     assert isinstance(out[7], FrameError) and out[7].field == "camera"
     assert [o[0] for i, o in enumerate(out) if i != 7] == [i for i in range(40) if i != 7]
     assert sum(o[1] for i, o in enumerate(out) if i != 7) >= 36
-    with pytest.raises(InvalidInputError):
-        solve_many(lines[5:9], seed000_db, workers=1)
+    for workers in (1, 2):  # raised in the caller, also from a forked worker (was: a hang)
+        with pytest.raises(InvalidInputError, match="camera"):
+            solve_many(lines[:20], seed000_db, workers=workers)

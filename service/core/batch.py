@@ -10,7 +10,7 @@ import multiprocessing as mp
 import os
 import pickle
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -190,8 +190,10 @@ def _fork_map(fn: Callable[[Any], Any], items: Sequence[Any], workers: int) -> l
     _JOB = (fn, items)
     try:
         out: list[Any] = []
-        with mp.get_context("fork").Pool(workers) as procs:
-            for chunk in procs.imap(_run_chunk, bounds):
+        # an executor, not mp.Pool: a worker that dies (killed, out of memory) raises
+        # BrokenProcessPool here instead of leaving the caller waiting forever
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("fork")) as procs:
+            for chunk in procs.map(_run_chunk, bounds):
                 if isinstance(chunk, _Raised):
                     raise chunk.error
                 out.extend(chunk)

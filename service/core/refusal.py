@@ -39,13 +39,21 @@ def refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavDatabase 
     if any(narrowest >= lo / OUTSIDE_FACTOR and diagonal <= hi * OUTSIDE_FACTOR for lo, hi in ranges):
         return None
     served = ", ".join(f"{lo:g}-{hi:g}" for lo, hi in ranges)
-    mag = min(max(6.5 + math.log10((8.6 / max(narrowest, 0.1)) ** 2) / 0.45, 4.5), 9.0)
-    return _refused(
-        NoSolutionReason.CAMERA_OUTSIDE_DATABASE, method, t0,
-        f"camera of {narrowest:.3g} deg side and {diagonal:.3g} deg diagonal is outside the "
-        f"database's range (side >= fov_min, diagonal <= fov_max: {served} deg); a database that serves it: "
-        f"skyfix db build --out db/camera --fov-min {math.floor(narrowest * 10) / 10:g} "
-        f"--fov-max {math.ceil(diagonal * 10 + 2) / 10:g} --mag-limit {mag:.1f}")
+    why = (f"camera of {narrowest:.3g} deg side and {diagonal:.3g} deg diagonal is outside the database's range "
+           f"(side >= fov_min, diagonal <= fov_max: {served} deg)")
+    return _refused(NoSolutionReason.CAMERA_OUTSIDE_DATABASE, method, t0, f"{why}; {_build_hint(narrowest, diagonal)}")
+
+
+def _build_hint(side: float, diagonal: float) -> str:
+    """The ``skyfix db build`` command of a database for a camera of this side and diagonal
+    (deg); its magnitude limit keeps about seed 000's stars a frame (V 6.5 at 8.6 deg; star
+    counts grow ~10^0.45 a magnitude), within V 4.5-9."""
+    fov_max = math.ceil(diagonal * 10 + 2) / 10
+    if fov_max >= 90:
+        return "skyfix databases serve fields below 90 deg (diagonal)"
+    mag = min(max(6.5 + math.log10((8.6 / max(side, 0.1)) ** 2) / 0.45, 4.5), 9.0)
+    return (f"a database that serves it: skyfix db build --out db/camera --fov-min {math.floor(side * 10) / 10:g} "
+            f"--fov-max {fov_max:g} --mag-limit {mag:.1f}")
 
 
 def _refused(reason: NoSolutionReason, method: str, t0: float, message: str) -> Solution:

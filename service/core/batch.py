@@ -9,6 +9,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import pickle
+import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -126,7 +127,7 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
         raising.
     pool : {"process", "thread"}
         ``"process"`` (POSIX fork): each worker is a forked copy of this process, truly
-        parallel. ``"thread"``: a thread pool; the numba kernels release the GIL, but measured
+        parallel (from a single-threaded process only; otherwise threads). ``"thread"``: a thread pool; the numba kernels release the GIL, but measured
         (docs/benchmarks.md, Batch) most of a frame's time is Python around them, so threads
         gain little.
     """
@@ -150,7 +151,9 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
 
     if workers == 1:
         return [task(f) for f in todo]
-    if pool == "process" and "fork" in mp.get_all_start_methods():
+    # fork only a single-threaded process: a thread holding a lock at the fork would leave the
+    # lock held forever in the child
+    if pool == "process" and "fork" in mp.get_all_start_methods() and threading.active_count() == 1:
         return _fork_map(task, todo, workers)
     with ThreadPoolExecutor(max_workers=workers) as threads:
         return list(threads.map(task, todo))

@@ -1,6 +1,9 @@
-"""The batch path: recorded frames parsed once, solved on threads, same answers as one by one."""
+"""The batch path: recorded frames parsed and solved in forked workers (or threads), the same answers as one by one."""
 
 from __future__ import annotations
+
+import os
+import threading
 
 import numpy as np
 import pytest
@@ -24,7 +27,10 @@ def _frames(n: int, seed: int) -> list[Frame]:
 def test_solve_many_equals_one_by_one(seed000_db: NavDatabase, pool: str) -> None:
     frames = _frames(24, 5)
     one_by_one = [solve_frame(f, seed000_db) for f in frames]
-    batched = solve_many(frames, seed000_db, workers=2, pool=pool)
+    ran = solve_many(frames, seed000_db, workers=2, pool=pool, then=lambda rec, sol: (sol, os.getpid()))
+    batched = [sol for sol, _ in ran]
+    if pool == "process" and threading.active_count() == 1:  # else it falls back to threads
+        assert os.getpid() not in {pid for _, pid in ran}, "solved in forked workers"
     assert sum(s.solved for s in one_by_one) >= 20
     for a, b in zip(one_by_one, batched, strict=True):
         assert a.status == b.status

@@ -1,4 +1,5 @@
-"""The batch path: recorded frames parsed and solved in forked workers (or threads), the same answers as one by one."""
+"""The batch path: recorded frames parsed and solved in forked workers (or threads), the same
+answers as one by one."""
 
 from __future__ import annotations
 

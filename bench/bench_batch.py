@@ -75,7 +75,8 @@ def main(argv: Sequence[str] | None = None) -> None:
             f"_seed{args.seed}")
     rec = make_recording(args.out / f"{stem}_n{args.frames}.jsonl", args, args.frames)
     one = args.out / f"{stem}_n1.jsonl"
-    one.write_text(rec.open().readline())
+    with rec.open() as f:
+        one.write_text(f.readline())
     info = common.machine_info()
     rows, results = [], []
     for w in (int(x) for x in args.workers.split(",")):

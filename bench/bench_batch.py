@@ -71,18 +71,20 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=common.OUT / "batch")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = f"fov{args.fov:g}_mag{args.mag_limit:g}_noise{args.noise:g}_false{args.false_stars}_seed{args.seed}"
+    stem = (f"fov{args.fov:g}_mag{args.mag_limit:g}_noise{args.noise:g}_false{args.false_stars}"
+            f"_seed{args.seed}")
     rec = make_recording(args.out / f"{stem}_n{args.frames}.jsonl", args, args.frames)
     one = args.out / f"{stem}_n1.jsonl"
-    one.write_text(rec.open().readline())
+    with rec.open() as f:
+        one.write_text(f.readline())
     info = common.machine_info()
     rows, results = [], []
     for w in (int(x) for x in args.workers.split(",")):
         start = run_solve(one, w, args.noise, args.db)["wall_s"]
         r = run_solve(rec, w, args.noise, args.db)
         solving = float(r["summary"].rsplit(" frames/s", 1)[0].rsplit(" ", 1)[1])
-        r.update(workers=w, start_s=start, frames=args.frames, fps=args.frames / r["wall_s"], fps_solving=solving,
-                 cpu_ms_per_frame=1e3 * r["cpu_s"] / args.frames)
+        r.update(workers=w, start_s=start, frames=args.frames, fps=args.frames / r["wall_s"],
+                 fps_solving=solving, cpu_ms_per_frame=1e3 * r["cpu_s"] / args.frames)
         results.append(r)
         rows.append([w, f"{r['wall_s']:.2f}", f"{start:.2f}", f"{r['fps']:.0f}", f"{solving:.0f}",
                      f"{r['cpu_ms_per_frame']:.3f}", r["summary"].split(";")[0]])
@@ -95,7 +97,8 @@ def main(argv: Sequence[str] | None = None) -> None:
               f"{r['fps_solving'] / base:.2f}x")
     print(f"load average after: {[round(x, 2) for x in os.getloadavg()]}")
     print(common.machine_line(info))
-    common.write_json(args.out / "bench_batch.json", {"args": vars(args), "machine": info, "results": results})
+    common.write_json(args.out / "bench_batch.json",
+                      {"args": vars(args), "machine": info, "results": results})
 
 
 if __name__ == "__main__":

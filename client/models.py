@@ -149,7 +149,9 @@ class StarResult(BaseModel):
     residual_arcsec: float = Field(description="Angle between the observed and the catalogue direction.")
 
 
-NoSolutionReason = Literal["too_few_stars", "camera_outside_database", "no_pattern_match", "not_proven", "time_limit"]
+NoSolutionReason = Literal[
+    "too_few_stars", "camera_outside_database", "no_pattern_match", "not_proven", "time_limit"
+]
 """Machine-readable reasons for ``no_solution`` (``SolveResult.reason``)."""
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from collections import Counter
@@ -11,12 +10,16 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
+import orjson
 import typer
 
 from ._progress import err_console, resolve_db
 
-BLOCK = 50_000
-"""Lines read, solved and written per block (bounds memory on long recordings)."""
+BLOCK = 20_000
+"""Lines of a recording file read, solved and written per block (bounds memory: ~70 MB)."""
+PIPE_BLOCK = 64
+"""Lines per block and worker from standard input, so that a live feed's answers come out
+after at most this many frames (one at a time with one worker)."""
 
 
 def solve_frames(
@@ -42,17 +45,19 @@ def solve_frames(
     times: list[float] = []
     n = solved = wrong = checked = 0
     reasons: Counter[str] = Counter()
+    n_workers = workers or _cores()
+    size = BLOCK if stream is not sys.stdin else (1 if n_workers == 1 else PIPE_BLOCK * n_workers)
     t0 = time.perf_counter()
     with stream:
         lineno = 0
         while True:
-            block = list(islice(stream, BLOCK))
+            block = list(islice(stream, size))
             if not block:
                 break
             numbered = [(lineno + i + 1, line) for i, line in enumerate(block) if line.strip()]
             lineno += len(block)
             results = solve_many([line for _, line in numbered], database, method=method, options=options,
-                                 workers=workers, then=_answer, return_errors=True)
+                                 workers=n_workers, then=_answer, return_errors=True)
             out = []
             for (num, _), res in zip(numbered, results, strict=True):
                 if isinstance(res, FrameError):
@@ -70,13 +75,15 @@ def solve_frames(
                     checked += 1
                     wrong += not correct
             sys.stdout.write("".join(out))
+            sys.stdout.flush()
     wall = time.perf_counter() - t0
     t = np.array(times) if times else np.zeros(1)
     why = ", ".join(f"{k} {v}" for k, v in reasons.most_common())
     err_console.print(
         f"{solved}/{n} identified ({100 * solved / max(n, 1):.1f}%), {wrong} wrong of {checked} with truth; "
-        f"solve ms p50 {np.percentile(t, 50):.2f} p95 {np.percentile(t, 95):.2f} p99 {np.percentile(t, 99):.2f}; "
-        f"{n / max(wall, 1e-9):.0f} frames/s on {workers or _cores()} worker(s)"
+        f"solve ms p50 {np.percentile(t, 50):.2f} p95 {np.percentile(t, 95):.2f} "
+        f"p99 {np.percentile(t, 99):.2f}; "
+        f"{n / max(wall, 1e-9):.0f} frames/s on {n_workers} worker(s)"
         + (f"; no_solution by reason: {why}" if why else "")
     )
 
@@ -101,4 +108,5 @@ def _answer(rec: dict[str, Any], sol: Any) -> tuple[str, bool, str | None, bool 
                             camera=c, blends={k - o: v for k, v in blends.items() if k >= o}).correct
                       for c, o in enumerate(np.cumsum([0, *sizes[:-1]]).tolist()))
     reason = None if sol.reason is None else sol.reason.value
-    return json.dumps(sol.to_dict(rec.get("id"))), sol.solved, reason, correct, sol.timings_ms.get("total", 0.0)
+    text = orjson.dumps(sol.to_dict(rec.get("id"))).decode()
+    return text, sol.solved, reason, correct, sol.timings_ms.get("total", 0.0)

@@ -6,13 +6,16 @@ This is the batch path of the engine, for ground processing of recordings (``sky
 
 from __future__ import annotations
 
-import json
 import multiprocessing as mp
 import os
+import pickle
+import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
+
+import orjson
 
 from .camera import Camera
 from .errors import InvalidInputError, SkyfixError
@@ -118,12 +121,13 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
         solution (the CLI formats and scores there); ``record`` is the item, parsed if it was a
         JSON line.
     return_errors : bool
+        JSON lines are parsed with orjson (strict JSON: no NaN or Infinity literals).
         An item whose parse or solve raises ``SkyfixError`` (or ``ValueError``, ``KeyError``,
         ``TypeError`` from a malformed line) gets a :class:`FrameError` in its place instead of
         raising.
     pool : {"process", "thread"}
         ``"process"`` (POSIX fork): each worker is a forked copy of this process, truly
-        parallel. ``"thread"``: a thread pool; the numba kernels release the GIL, but measured
+        parallel (from a single-threaded process only; otherwise threads). ``"thread"``: a thread pool; the numba kernels release the GIL, but measured
         (docs/benchmarks.md, Batch) most of a frame's time is Python around them, so threads
         gain little.
     """
@@ -136,7 +140,7 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
 
     def task(item: Item) -> Any:
         try:
-            rec = json.loads(item) if isinstance(item, (str, bytes)) else item
+            rec = orjson.loads(item) if isinstance(item, (str, bytes)) else item
             frame = rec if isinstance(rec, Frame) else frame_from_record(rec)
             sol = solve_frame(frame, db, method=method, options=options)
             return sol if then is None else then(rec, sol)
@@ -147,7 +151,9 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
 
     if workers == 1:
         return [task(f) for f in todo]
-    if pool == "process" and "fork" in mp.get_all_start_methods():
+    # fork only a single-threaded process: a thread holding a lock at the fork would leave the
+    # lock held forever in the child
+    if pool == "process" and "fork" in mp.get_all_start_methods() and threading.active_count() == 1:
         return _fork_map(task, todo, workers)
     with ThreadPoolExecutor(max_workers=workers) as threads:
         return list(threads.map(task, todo))
@@ -158,10 +164,24 @@ _JOB: tuple[Callable[[Any], Any], Sequence[Any]] | None = None
 chunk bounds go to a worker and only results come back (nothing else is pickled)."""
 
 
-def _run_chunk(bounds: tuple[int, int]) -> list[Any]:
+@dataclass(frozen=True)
+class _Raised:
+    """An exception raised in a forked worker, carried back to be raised in the caller."""
+
+    error: BaseException
+
+
+def _run_chunk(bounds: tuple[int, int]) -> list[Any] | _Raised:
     assert _JOB is not None
     fn, items = _JOB
-    return [fn(item) for item in items[bounds[0]:bounds[1]]]
+    try:
+        return [fn(item) for item in items[bounds[0]:bounds[1]]]
+    except Exception as exc:  # noqa: BLE001 - re-raised in the caller
+        try:
+            pickle.loads(pickle.dumps(exc))
+        except Exception:  # noqa: BLE001 - an exception that cannot cross processes
+            exc = RuntimeError(f"{type(exc).__name__}: {exc}")
+        return _Raised(exc)
 
 
 def _fork_map(fn: Callable[[Any], Any], items: Sequence[Any], workers: int) -> list[Any]:
@@ -172,8 +192,15 @@ def _fork_map(fn: Callable[[Any], Any], items: Sequence[Any], workers: int) -> l
     bounds = [(lo, min(lo + size, len(items))) for lo in range(0, len(items), size)]
     _JOB = (fn, items)
     try:
-        with mp.get_context("fork").Pool(workers) as procs:
-            return [r for chunk in procs.imap(_run_chunk, bounds) for r in chunk]
+        out: list[Any] = []
+        # an executor, not mp.Pool: a worker that dies (killed, out of memory) raises
+        # BrokenProcessPool here instead of leaving the caller waiting forever
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("fork")) as procs:
+            for chunk in procs.map(_run_chunk, bounds):
+                if isinstance(chunk, _Raised):
+                    raise chunk.error
+                out.extend(chunk)
+        return out
     finally:
         _JOB = None
 

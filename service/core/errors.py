@@ -27,6 +27,9 @@ class InvalidInputError(SkyfixError, ValueError):
         self.field = field
         self.message = message
 
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:  # picklable: batch workers send it back
+        return (type(self), (self.field, self.message))
+
 
 class ImageDecodeError(InvalidInputError):
     """The bytes are not an image skyfix can decode (corrupt or unsupported format)."""
@@ -39,6 +42,9 @@ class UnknownMethodError(SkyfixError, KeyError):
         super().__init__(name)
         self.name = name
         self.known = known
+
+    def __reduce__(self) -> tuple[type, tuple[str, list[str]]]:  # picklable: batch workers send it back
+        return (type(self), (self.name, self.known))
 
     def __str__(self) -> str:
         return f"unknown method {self.name!r}; known: {', '.join(self.known)}"

@@ -23,7 +23,8 @@ from .errors import InvalidInputError
 from .methods import SolveContext, get_matcher, resolve
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .photometry import FAINT_GATE_MAG, beyond_completeness, too_bright
-from .types import Centroids, NoSolutionReason, Solution, SolveStatus, StarMatch
+from .refusal import no_solution, refusal
+from .types import Centroids, Solution, SolveStatus, StarMatch
 from .verify import Observation, Verified, Verifier, star_tree
 
 Quaternion = Sequence[float]
@@ -131,7 +132,7 @@ def solve_rig(
         members, deepest = [db], db
     fov = max(cam.fov_deg for _, cam, _ in frames)
     method_lists = [resolve(m, method, fov_deg=fov, sigma_px=options.centroid_sigma_px) for m in members]
-    refused = _refusal(frames, db, method, t0)
+    refused = refusal(frames, db, method, t0)
     if refused is not None:
         return refused
     _ensure_warm(db)  # one-off per opened database; not charged to this frame's time limit
@@ -161,7 +162,7 @@ def solve_rig(
     timings["identify"] = (t2 - t1) * 1e3
     if found is None:
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        return _no_solution(method, tried, trials, t2 > deadline, timings)
+        return no_solution(method, tried, trials, t2 > deadline, timings)
     if deepest is not db:
         refined = _refine(obs, db, deepest, found, sigma, options)
         if refined is not None:
@@ -233,60 +234,6 @@ def _identify(
         if found is not None:
             return found, name, verifier.trials
     return None, used, verifier.trials
-
-
-OUTSIDE_FACTOR = 2.0
-"""A camera is outside a database (refused at once) when its side is below ``fov_min_deg /
-OUTSIDE_FACTOR`` of every member, or its diagonal above ``fov_max_deg * OUTSIDE_FACTOR``. Within
-a factor of 2 a camera still often solves (measured on the default database, 30 frames each, 0.5
-px: 2.5 deg at V 8.5: 13/30; 36 deg at V 5.5: 17/30; 45 deg at V 5.0: 5/30), beyond it not (1.5
-deg at V 9: 0/30; 60 deg at V 5: 0/30, each taking 3-700 ms to say so)."""
-
-
-def _refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavDatabase | NavDatabaseSet,
-             method: str, t0: float) -> Solution | None:
-    """A ``no_solution`` for a frame no method can solve, decided before any warm-up or search
-    (a few microseconds): fewer than 3 stars, or a camera outside every member's range (see
-    ``OUTSIDE_FACTOR``). None if the frame is worth searching."""
-    n = sum(len(c) for c, _, _ in frames)
-    if n < 3:
-        return _refused(NoSolutionReason.TOO_FEW_STARS, method, t0,
-                        f"{n} star(s) given; identification needs at least 3")
-    widest = max((cam for _, cam, _ in frames), key=lambda c: c.diagonal_fov_deg)
-    narrowest = min(min(cam.fov_deg, cam.fov_y_deg) for _, cam, _ in frames)
-    members = list(db.members.values()) if isinstance(db, NavDatabaseSet) else [db]
-    ranges = [(float(m.manifest["fov_min_deg"]), float(m.manifest["fov_max_deg"])) for m in members]
-    if any(narrowest >= lo / OUTSIDE_FACTOR and widest.diagonal_fov_deg <= hi * OUTSIDE_FACTOR
-           for lo, hi in ranges):
-        return None
-    served = ", ".join(f"{lo:g}-{hi:g}" for lo, hi in ranges)
-    mag = min(max(6.5 + math.log10((8.6 / max(narrowest, 0.1)) ** 2) / 0.45, 4.5), 9.0)
-    return _refused(
-        NoSolutionReason.CAMERA_OUTSIDE_DATABASE, method, t0,
-        f"camera of {narrowest:.3g} deg side and {widest.diagonal_fov_deg:.3g} deg diagonal is outside the "
-        f"database's range (side >= fov_min, diagonal <= fov_max: {served} deg); a database that serves it: "
-        f"skyfix db build --out db/camera --fov-min {math.floor(narrowest * 10) / 10:g} "
-        f"--fov-max {math.ceil(widest.diagonal_fov_deg * 10 + 2) / 10:g} --mag-limit {mag:.1f}")
-
-
-def _refused(reason: NoSolutionReason, method: str, t0: float, message: str) -> Solution:
-    return Solution(SolveStatus.NO_SOLUTION, method, reason=reason, message=message,
-                    timings_ms={"total": (time.perf_counter() - t0) * 1e3})
-
-
-def _no_solution(method: str, tried: list[str], trials: int, late: bool, timings: dict[str, float]) -> Solution:
-    """The answer of a searched frame that nothing proved: why, and what ran."""
-    ran = tuple(dict.fromkeys(tried))
-    if late:
-        reason, why = NoSolutionReason.TIME_LIMIT, "the time limit ended the search"
-    elif trials == 0:
-        reason, why = NoSolutionReason.NO_PATTERN_MATCH, "no catalogue pattern matched the frame's"
-    else:
-        reason, why = (NoSolutionReason.NOT_PROVEN,
-                       f"{trials} candidate attitude(s) checked, none proven beyond the coincidence bound")
-    return Solution(SolveStatus.NO_SOLUTION, tried[-1] if tried else method, reason=reason,
-                    methods_tried=ran, message=f"{why} (methods tried: {', '.join(ran) or 'none'})",
-                    timings_ms=timings)
 
 
 def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: list[np.ndarray]) -> Observation:

@@ -112,3 +112,14 @@ def test_real_frames_load() -> None:
     assert len(frames) == 38
     f = frames[0]
     assert len(f.hip) == len(f.centroids) and len(f.quaternion) == 4
+
+
+def test_bench_batch_smoke(tmp_path: Path, maxangle_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from bench import bench_batch
+
+    bench_batch.main(["--frames", "12", "--workers", "2", "--fov", "8.58", "--mag-limit", "6.5", "--noise", "0.5",
+                      "--db", str(maxangle_db), "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert "| 2 |" in out and "identified" in out and "0 wrong" in out
+    (run,) = json.loads((tmp_path / "bench_batch.json").read_text())["results"]
+    assert run["workers"] == 2 and run["frames"] == 12 and run["fps_solving"] > 0

@@ -1,6 +1,10 @@
-"""The batch path: recorded frames parsed once, solved on threads, same answers as one by one."""
+"""The batch path: recorded frames parsed and solved in forked workers (or threads), the same
+answers as one by one."""
 
 from __future__ import annotations
+
+import os
+import threading
 
 import numpy as np
 import pytest
@@ -24,7 +28,10 @@ def _frames(n: int, seed: int) -> list[Frame]:
 def test_solve_many_equals_one_by_one(seed000_db: NavDatabase, pool: str) -> None:
     frames = _frames(24, 5)
     one_by_one = [solve_frame(f, seed000_db) for f in frames]
-    batched = solve_many(frames, seed000_db, workers=2, pool=pool)
+    ran = solve_many(frames, seed000_db, workers=2, pool=pool, then=lambda rec, sol: (sol, os.getpid()))
+    batched = [sol for sol, _ in ran]
+    if pool == "process" and threading.active_count() == 1:  # else it falls back to threads
+        assert os.getpid() not in {pid for _, pid in ran}, "solved in forked workers"
     assert sum(s.solved for s in one_by_one) >= 20
     for a, b in zip(one_by_one, batched, strict=True):
         assert a.status == b.status
@@ -71,12 +78,14 @@ def test_solve_many_parses_lines_in_the_workers_and_returns_errors(seed000_db: N
 
     cam = {"width": 1024, "height": 1024, "focal_mm": 94.9489, "pixel_um": 14.0}
     sims = simulate_frames(SEED000_CAMERA, 40, SimConfig(centroid_noise_px=0.5), rng=8)
-    lines = [json.dumps({"id": i, "camera": cam, "centroids": f.centroids.xy.tolist()}) for i, f in enumerate(sims)]
+    lines = [json.dumps({"id": i, "camera": cam, "centroids": f.centroids.xy.tolist()})
+             for i, f in enumerate(sims)]
     lines[7] = json.dumps({"id": 7, "centroids": [[1, 2]]})  # no camera
     out = solve_many(lines, seed000_db, workers=2, return_errors=True,
                      then=lambda rec, sol: (rec["id"], sol.solved, sol.reason))
     assert isinstance(out[7], FrameError) and out[7].field == "camera"
     assert [o[0] for i, o in enumerate(out) if i != 7] == [i for i in range(40) if i != 7]
     assert sum(o[1] for i, o in enumerate(out) if i != 7) >= 36
-    with pytest.raises(InvalidInputError):
-        solve_many(lines[5:9], seed000_db, workers=1)
+    for workers in (1, 2):  # raised in the caller, also from a forked worker (was: a hang)
+        with pytest.raises(InvalidInputError, match="camera"):
+            solve_many(lines[:20], seed000_db, workers=workers)

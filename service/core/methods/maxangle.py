@@ -58,31 +58,6 @@ def _sorted_sides(d_jk: np.ndarray, d_ik: np.ndarray, d_ij: np.ndarray, i: np.nd
     return np.take_along_axis(sides, order, 1), np.take_along_axis(ids, order, 1)
 
 
-PATTERN_PARAMS = ("pattern_mag_limit", "pattern_cap", "pattern_radius_deg")
-
-
-def pattern_stars(stars: StarTable, params: dict[str, Any]) -> np.ndarray:
-    """Rows of ``stars`` (brightest first) that the triangles are made of: all of them, or those
-    at most ``pattern_mag_limit`` (V) and, with ``pattern_cap``, having fewer than that many
-    brighter pattern stars within ``pattern_radius_deg``. A database whose table must reach
-    across a wide field (``d_max_deg``) keeps it tractable this way: a camera forms its
-    triangles of its brightest stars only, which such a cap keeps."""
-    from scipy.spatial import cKDTree
-
-    from ..geometry import chord_from_angle
-
-    keep = np.ones(len(stars.vec), dtype=bool)
-    if "pattern_mag_limit" in params:
-        keep &= np.asarray(stars.mag) <= float(params["pattern_mag_limit"])
-    rows = np.flatnonzero(keep)
-    if "pattern_cap" in params and len(rows):
-        radius = chord_from_angle(math.radians(float(params.get("pattern_radius_deg", 5.0))))
-        pairs = cKDTree(stars.vec[rows]).query_pairs(float(radius), output_type="ndarray")
-        brighter = np.bincount(pairs.max(axis=1), minlength=len(rows)) if len(pairs) else np.zeros(len(rows), int)
-        rows = rows[brighter < int(params["pattern_cap"])]
-    return rows.astype(np.int64)
-
-
 class MaxAngle:
     name = "maxangle"
     summary = "triangles hashed by their maximum interior angle into N blocks (seed 000)"
@@ -93,8 +68,7 @@ class MaxAngle:
         d_max_deg = float(params.get("d_max_deg", config.fov_min_deg))
         xi_deg = float(params.get("xi_deg", 0.05))
         n_blocks = int(params.get("n_blocks", 1024))
-        rows_kept = pattern_stars(stars, params)
-        vec = stars.vec[rows_kept]
+        vec = stars.vec
         n = len(vec)
         pairs, angles = build_pair_table(vec, math.radians(d_max_deg), math.radians(xi_deg))
         # adjacency with the lower index first; group by the lower index
@@ -143,14 +117,13 @@ class MaxAngle:
         allrec, key = allrec[order], key[order]
         progress(f"{len(key)} triangles", 1.0)
         tables = {
-            "ids": rows_kept[allrec[:, :3].astype(np.int64)].astype(np.int32),
+            "ids": allrec[:, :3].astype(np.int32),
             "key": key,
             "c": allrec[:, 4].astype(np.float32),
             "theta": allrec[:, 5].astype(np.float32),
         }
         meta = {"d_max_deg": d_max_deg, "xi_deg": xi_deg, "n_blocks": n_blocks, "b_scale": b_scale,
-                "n_triangles": int(len(key)), "n_pattern_stars": int(n),
-                **{k: params[k] for k in PATTERN_PARAMS if k in params}}
+                "n_triangles": int(len(key))}
         return tables, meta
 
     def matcher(self, db: NavDatabase) -> MaxAngleMatcher:

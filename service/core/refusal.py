@@ -1,0 +1,80 @@
+"""Why a frame has no solution: the refusals decided before any search, and the reason of a
+search that proved nothing (``Solution.reason``, ``methods_tried``, ``message``)."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+
+from .camera import Camera
+from .navdb.reader import NavDatabase, NavDatabaseSet
+from .types import Centroids, NoSolutionReason, Solution, SolveStatus
+
+
+OUTSIDE_FACTOR = 2.0
+"""A camera is outside a database (refused at once) when no member has both ``fov_min_deg /
+OUTSIDE_FACTOR`` <= the camera's side and its diagonal <= ``fov_max_deg * OUTSIDE_FACTOR``. Within
+a factor of 2 a camera still often solves (measured on the default database, 30 frames each, 0.5
+px: 2.5 deg at V 8.5: 13/30; 36 deg at V 5.5: 17/30; 45 deg at V 5.0: 5/30), beyond it not (1.5
+deg at V 9: 0/30; 60 deg at V 5: 0/30, each taking 3-700 ms to say so)."""
+
+
+def refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavDatabase | NavDatabaseSet,
+            method: str, t0: float) -> Solution | None:
+    """A ``no_solution`` for a frame no method can solve, decided before any warm-up or search
+    (a few microseconds): fewer than 3 stars, or a camera outside every member's range (see
+    ``OUTSIDE_FACTOR``). None if the frame is worth searching."""
+    n = sum(len(c) for c, _, _ in frames)
+    if n < 3:
+        return _refused(NoSolutionReason.TOO_FEW_STARS, method, t0,
+                        f"{n} star(s) given; identification needs at least 3")
+    diagonal = max(cam.diagonal_fov_deg for _, cam, _ in frames)
+    narrowest = min(min(cam.fov_deg, cam.fov_y_deg) for _, cam, _ in frames)
+    ranges = db.__dict__.get("_fov_ranges")
+    if ranges is None:  # once per opened database
+        members = list(db.members.values()) if isinstance(db, NavDatabaseSet) else [db]
+        ranges = [(float(m.manifest["fov_min_deg"]), float(m.manifest["fov_max_deg"])) for m in members]
+        db.__dict__["_fov_ranges"] = ranges
+    if any(narrowest >= lo / OUTSIDE_FACTOR and diagonal <= hi * OUTSIDE_FACTOR for lo, hi in ranges):
+        return None
+    served = ", ".join(f"{lo:g}-{hi:g}" for lo, hi in ranges)
+    why = (f"camera of {narrowest:.3g} deg side and {diagonal:.3g} deg diagonal is outside the database's range "
+           f"(side >= fov_min, diagonal <= fov_max: {served} deg)")
+    return _refused(NoSolutionReason.CAMERA_OUTSIDE_DATABASE, method, t0, f"{why}; {_build_hint(narrowest, diagonal)}")
+
+
+def _build_hint(side: float, diagonal: float) -> str:
+    """The ``skyfix db build`` command of a database for a camera of this side and diagonal
+    (deg); its magnitude limit keeps about seed 000's stars a frame (V 6.5 at 8.6 deg; star
+    counts grow ~10^0.45 a magnitude), within V 4.5-9."""
+    fov_max = math.ceil(diagonal * 10 + 2) / 10
+    if fov_max >= 90:
+        return "skyfix databases serve fields below 90 deg (diagonal)"
+    mag = min(max(6.5 + math.log10((8.6 / max(side, 0.1)) ** 2) / 0.45, 4.5), 9.0)
+    return (f"a database that serves it: skyfix db build --out db/camera --fov-min {math.floor(side * 10) / 10:g} "
+            f"--fov-max {fov_max:g} --mag-limit {mag:.1f}")
+
+
+def _refused(reason: NoSolutionReason, method: str, t0: float, message: str) -> Solution:
+    return Solution(SolveStatus.NO_SOLUTION, method, reason=reason, message=message,
+                    timings_ms={"total": (time.perf_counter() - t0) * 1e3})
+
+
+def no_solution(method: str, tried: list[str], trials: int, late: bool,
+                timings: dict[str, float]) -> Solution:
+    """The answer of a searched frame that nothing proved: why, and what ran."""
+    ran = tuple(dict.fromkeys(tried))
+    if late:
+        reason, why = NoSolutionReason.TIME_LIMIT, "the time limit ended the search"
+    elif trials == 0:
+        reason, why = NoSolutionReason.NO_PATTERN_MATCH, "no catalogue pattern matched the frame's"
+    else:
+        reason, why = (NoSolutionReason.NOT_PROVEN,
+                       f"{trials} candidate attitude(s) checked, none proven beyond the coincidence bound")
+    return Solution(SolveStatus.NO_SOLUTION, tried[-1] if tried else method, reason=reason,
+                    methods_tried=ran, message=f"{why} (methods tried: {', '.join(ran) or 'none'})",
+                    timings_ms=timings)
+
+
+__all__ = ["OUTSIDE_FACTOR", "no_solution", "refusal"]

@@ -25,8 +25,12 @@ app.command("calibrate")(calibrate_camera)
 
 
 def main() -> None:
-    """Console-script entry point."""
-    app()
+    """Console-script entry point: every mistake ends in one line and a non-zero exit."""
+    import sys
+
+    from .errors import run
+
+    sys.exit(run(app))
 
 
 __all__ = ["app", "main"]

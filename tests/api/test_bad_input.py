@@ -74,3 +74,22 @@ def test_wrong_length_distortion_keeps_the_websocket_stream_alive(server: LiveSe
             assert json.loads(ws.recv(timeout=30))["status"] == "solved"
         except ConnectionClosed as exc:  # pragma: no cover - the failure this test exists for
             pytest.fail(f"stream dropped: {exc}")
+
+
+@pytest.mark.parametrize(("query", "param"), [
+    ("fov_deg=abc", "fov_deg"), ("fov_deg=nan", "fov_deg"), ("fov_deg=200", "fov_deg"), ("track=maybe", "track"),
+    ("method=nope", "method"), ("hint_radius_deg=-1", "hint_radius_deg"), ("camera=ghost", "camera"),
+    ("camera=tetra3&fov_deg=10", "fov_deg"),
+])
+def test_bad_stream_query_closes_with_1008_naming_the_parameter(server: LiveServer, query: str, param: str) -> None:
+    with connect(f"{server.ws_url}?{query}") as ws, pytest.raises(ConnectionClosed) as closed:
+        ws.recv(timeout=10)
+    frame = closed.value.rcvd
+    assert frame is not None and frame.code == 1008 and frame.reason.startswith(param), frame
+
+
+def test_good_stream_query_is_accepted(server: LiveServer, frames: list[SimFrame]) -> None:
+    good = _good(frames)
+    with connect(f"{server.ws_url}?fov_deg=11.4&track=true&method=pyramid") as ws:
+        ws.send(json.dumps({"id": 1, **good}))
+        assert json.loads(ws.recv(timeout=30))["status"] == "solved"

@@ -13,7 +13,7 @@ Frames and units
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -134,6 +134,10 @@ class SolveRequest(_Model):
         None, gt=0, le=20,
         description="Expected centroid error per axis, px (default 1). Sets the pattern tolerance and the "
         "match radius: raise it for faint or distorted stars.",
+    )
+    truth: dict[str, Any] | None = Field(
+        None, description="Ignored: a recording's known answer (`skyfix sim`), accepted so that a recorded "
+        "frame can be sent as it is. The server never reads it.",
     )
 
     @model_validator(mode="after")

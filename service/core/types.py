@@ -64,7 +64,11 @@ class Centroids:
     def from_list(cls, rows: Any, *, field_name: str = "centroids") -> Centroids:
         """Build from ``[[x, y], ...]`` or ``[[x, y, flux], ...]``; rows without flux get
         flux decreasing with their index (the list is taken as brightest first)."""
-        arr = np.asarray(rows, dtype=np.float64)
+        try:
+            arr = np.asarray(rows, dtype=np.float64)
+        except (TypeError, ValueError):  # ragged: rows of 2 and of 3 values mixed, or not numbers
+            raise InvalidInputError(field_name, "expected a list of [x, y] or [x, y, flux] rows, "
+                                                "all of the same length") from None
         if arr.size == 0:
             return cls(np.zeros((0, 2)), np.zeros(0))
         if arr.ndim != 2 or arr.shape[1] not in (2, 3):

@@ -93,3 +93,47 @@ def test_good_stream_query_is_accepted(server: LiveServer, frames: list[SimFrame
     with connect(f"{server.ws_url}?fov_deg=11.4&track=true&method=pyramid") as ws:
         ws.send(json.dumps({"id": 1, **good}))
         assert json.loads(ws.recv(timeout=30))["status"] == "solved"
+
+
+def test_image_endpoint_refuses_camera_with_fov_deg(client: httpx.Client, frames: list[SimFrame]) -> None:
+    files = {"image": ("x.png", b"\x89PNG not really", "image/png")}
+    r = client.post("/v1/solve/image", files=files, data={"camera": "tetra3", "fov_deg": "11.4"})
+    assert r.status_code == 422 and r.json()["field"] == "fov_deg" and "not both" in r.json()["detail"], r.text
+    json_twin = client.post("/v1/solve", json={"camera": {**CAMERA_SPEC, "f_px": 5000.0}, "centroids": [[1, 2]]})
+    assert json_twin.status_code == 422  # the JSON endpoint refuses the same ambiguity
+
+
+@pytest.mark.parametrize("value", ["nan", "NaN", "inf"])
+def test_image_fov_deg_nan_says_finite(client: httpx.Client, value: str) -> None:
+    files = {"image": ("x.png", b"\x89PNG not really", "image/png")}
+    r = client.post("/v1/solve/image", files=files, data={"fov_deg": value})
+    assert r.status_code == 422 and r.json()["field"] == "fov_deg", r.text
+    assert "finite" in r.json()["detail"] and "170" not in r.json()["detail"], r.text
+
+
+def test_too_many_centroids_names_the_servers_limit(server: LiveServer, client: httpx.Client) -> None:
+    limit = server.settings.max_centroids
+    body = {"camera": "tetra3", "centroids": [[1, 2]] * 10_001}
+    r = client.post("/v1/solve", json=body)
+    assert r.status_code == 422 and r.json()["field"] == "centroids", r.text
+    assert f"at most {limit}" in r.json()["detail"] and "10000" not in r.json()["detail"], r.text
+    with connect(server.ws_url) as ws:
+        ws.send(json.dumps({"id": 1, **body}))
+        reply = json.loads(ws.recv(timeout=30))
+    assert reply["code"] == 422 and f"at most {limit}" in reply["detail"], reply
+
+
+def test_rows_of_mixed_length_are_a_422(client: httpx.Client, server: LiveServer) -> None:
+    body = {"camera": "tetra3", "centroids": [[1.0, 2.0, 30.0], [4.0, 5.0], [6.0, 7.0]]}
+    r = client.post("/v1/solve", json=body)
+    assert r.status_code == 422 and r.json()["field"] == "centroids", r.text
+    with connect(server.ws_url) as ws:
+        ws.send(json.dumps({"id": 1, **body}))
+        assert json.loads(ws.recv(timeout=30))["code"] == 422
+
+
+def test_a_recorded_frame_with_truth_is_accepted(client: httpx.Client, frames: list[SimFrame]) -> None:
+    frame = next(f for f in frames if real_stars(f) >= 8)
+    line = {"id": 7, **_good(frames), "truth": {"quaternion": list(frame.quaternion), "hip": frame.hip.tolist()}}
+    r = client.post("/v1/solve", json=line)
+    assert r.status_code == 200 and r.json()["status"] == "solved" and "truth" not in r.json(), r.text

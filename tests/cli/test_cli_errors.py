@@ -98,3 +98,10 @@ def test_db_info_and_verify_on_the_default_set(files: dict[str, Path], capfd: py
     assert info["format"] == "set" and info["members"] and all(m["n_stars"] > 0 for m in info["members"].values())
     assert run(app, ["db", "verify", str(path)]) == 0
     assert capfd.readouterr().err.startswith("OK")
+
+
+def test_version(capfd: pytest.CaptureFixture[str]) -> None:
+    from service import __version__
+
+    assert run(app, ["--version"]) == 0
+    assert capfd.readouterr().out.strip() == f"skyfix {__version__}"

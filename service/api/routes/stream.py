@@ -96,7 +96,7 @@ class _Frames:
                 sol = await self._centroids(SolveRequest.model_validate(obj))
         except (SkyfixError, ValidationError, ApiError) as exc:
             self.solver.metrics.ws_frames[f"{kind}_error"] += 1
-            code, detail, field = error_status(exc)
+            code, detail, field = error_status(exc, self.settings.max_centroids)
             return StreamError(id=frame_id, code=code, detail=detail, field=field).model_dump_json()
         self.solver.metrics.ws_frames[kind] += 1
         if self.state.track:

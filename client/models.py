@@ -13,9 +13,9 @@ Frames and units
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 MAX_CENTROIDS = 10_000
 """Hard cap on centroids per camera in one request (the server may set a lower one)."""
@@ -48,13 +48,22 @@ class CameraSpec(_Model):
     cy: float | None = Field(None, description="Principal point y (row), px; default (height-1)/2.")
     distortion: list[float] | None = Field(
         None,
-        max_length=8,
-        description="Brown-Conrady coefficients in OpenCV order (k1, k2, p1, p2[, k3...]).",
+        max_length=14,
+        description=("Brown-Conrady coefficients in OpenCV order: 4, 5, 8, 12 or 14 values "
+                     "(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]]); terms after k3 must be 0."),
     )
     mounting_quaternion: Quaternion | None = Field(
         None,
         description="Rig cameras: rotation of body-frame vectors into this camera's frame, [w, x, y, z].",
     )
+
+    @field_validator("distortion")
+    @classmethod
+    def _opencv_length(cls, v: list[float] | None) -> list[float] | None:
+        if v is not None and len(v) not in (4, 5, 8, 12, 14):
+            raise ValueError(f"{len(v)} values; give 4, 5, 8, 12 or 14 as OpenCV takes "
+                             "(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]])")
+        return v
 
     @model_validator(mode="after")
     def _one_focal(self) -> CameraSpec:
@@ -125,6 +134,10 @@ class SolveRequest(_Model):
         None, gt=0, le=20,
         description="Expected centroid error per axis, px (default 1). Sets the pattern tolerance and the "
         "match radius: raise it for faint or distorted stars.",
+    )
+    truth: dict[str, Any] | None = Field(
+        None, description="Ignored: a recording's known answer (`skyfix sim`), accepted so that a recorded "
+        "frame can be sent as it is. The server never reads it.",
     )
 
     @model_validator(mode="after")

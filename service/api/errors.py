@@ -60,18 +60,23 @@ def dotted(loc: Sequence[int | str]) -> str | None:
     return ".".join(parts) or None
 
 
-def describe(errors: Sequence[Any]) -> tuple[str, str | None]:
-    """Message and field of the first pydantic error (the one a person fixes first)."""
+def describe(errors: Sequence[Any], max_centroids: int | None = None) -> tuple[str, str | None]:
+    """Message and field of the first pydantic error (the one a person fixes first);
+    ``max_centroids``, the server's own limit, replaces the schema's hard cap in the message."""
     if not errors:
         return "invalid input", None
     err = errors[0]
     field = dotted(err.get("loc", ()))
     msg = str(err.get("msg", "invalid input"))
+    actual = (err.get("ctx") or {}).get("actual_length")
+    if max_centroids and err.get("type") == "too_long" and (field or "").endswith("centroids") and actual:
+        msg = f"{actual} centroids, this server takes at most {max_centroids}"
     return (f"{field}: {msg}" if field else msg), field or "body"
 
 
-def error_status(exc: Exception) -> tuple[int, str, str | None]:
-    """``(status, detail, field)`` of an input error, for REST and the WebSocket alike."""
+def error_status(exc: Exception, max_centroids: int | None = None) -> tuple[int, str, str | None]:
+    """``(status, detail, field)`` of an input error, for REST and the WebSocket alike
+    (``max_centroids``: the server's limit, named in the message for too many centroids)."""
     if isinstance(exc, ApiError):
         return exc.status_code, exc.detail, exc.field
     if isinstance(exc, InvalidInputError):
@@ -83,7 +88,7 @@ def error_status(exc: Exception) -> tuple[int, str, str | None]:
         if errors and errors[0].get("type") == "json_invalid":
             ctx = errors[0].get("ctx") or {}
             return 400, f"body is not valid JSON: {ctx.get('error', 'decode error')}", "body"
-        detail, field = describe(errors)
+        detail, field = describe(errors, max_centroids)
         return 422, detail, field
     if isinstance(exc, DatabaseError):
         log.error("navigation database unusable: %s", exc)
@@ -98,7 +103,8 @@ def _response(status: int, detail: str, field: str | None,
 
 
 async def _handle(request: Request, exc: Exception) -> JSONResponse:
-    status, detail, field = error_status(exc)
+    settings = getattr(request.app.state, "settings", None)
+    status, detail, field = error_status(exc, getattr(settings, "max_centroids", None))
     return _response(status, detail, field, getattr(exc, "headers", None))
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -54,18 +54,32 @@ def build(
 
 @app.command()
 def info(db: Annotated[Path | None, typer.Argument(help="Database directory (default: the default one).")] = None) -> None:
-    """Print a database's manifest summary as JSON."""
+    """Print a database's manifest summary as JSON (a set: each member's)."""
     from ..core.navdb import open_database
+    from ..core.navdb.reader import NavDatabaseSet
 
     t0 = time.perf_counter()
     d = open_database(resolve_db(db))
     ms = (time.perf_counter() - t0) * 1e3
+    if isinstance(d, NavDatabaseSet):  # the default database is a set of members
+        members = {name: _summary(m) for name, m in d.members.items()}
+        summary: dict[str, Any] = {"format": "set", "schema_version": d.manifest.get("schema_version"),
+                                   "methods": d.methods, "members": members}
+        summary.update(path=str(d.path.resolve()), size_bytes=sum(m["size_bytes"] for m in members.values()))
+    else:
+        summary = _summary(d)
+    summary["open_ms"] = round(ms, 2)
+    typer.echo(json.dumps(summary, indent=1))
+
+
+def _summary(d: Any) -> dict[str, Any]:
+    """A single database's manifest summary, its path and its size on disk, bytes."""
     m = d.manifest
     size = sum((d.path / a["file"]).stat().st_size for a in m["arrays"].values())
-    summary = {k: m[k] for k in ("schema_version", "catalogue", "epoch", "mag_limit", "fov_min_deg", "fov_max_deg",
-                                  "n_stars", "built_utc", "build_seconds", "methods", "shared")}
-    summary.update(path=str(d.path.resolve()), size_bytes=size, open_ms=round(ms, 2))
-    typer.echo(json.dumps(summary, indent=1))
+    summary = {k: m.get(k) for k in ("schema_version", "catalogue", "epoch", "mag_limit", "fov_min_deg",
+                                      "fov_max_deg", "n_stars", "built_utc", "build_seconds", "methods", "shared")}
+    summary.update(path=str(d.path.resolve()), size_bytes=size)
+    return summary
 
 
 @app.command()

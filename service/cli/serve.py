@@ -34,13 +34,16 @@ def serve(
     db: Annotated[Path | None, typer.Option(help="Navigation database directory (env SKYFIX_DB_PATH; "
                                             "default: the default database, built on first use).")] = None,
     log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
+    verify: Annotated[bool, typer.Option("--verify", help="Check every array's sha256 before starting "
+                                         "(seconds for the default database; always: headers, sizes, "
+                                         "stars, sampled bytes).")] = False,
 ) -> None:
     """Serve the REST and WebSocket API."""
     import uvicorn
 
     from ..api.settings import Settings
     from ..core.errors import DatabaseError
-    from ..core.navdb import open_database
+    from ..core.navdb.integrity import check_at_start
     from .supervisor import Supervisor
 
     overrides = {k: v for k, v in {"host": host, "port": port, "workers": workers, "db_path": db}.items()
@@ -52,7 +55,7 @@ def serve(
         raise typer.Exit(2) from None
     path = settings.db_path or _default_database()
     try:
-        open_database(path)
+        check_at_start(path, verify_hashes=verify)
     except DatabaseError as exc:
         typer.echo(f"skyfix serve: {exc}", err=True)
         raise typer.Exit(2) from None

@@ -62,7 +62,7 @@ class Camera:
         cy: float | None = None,
         distortion: Any = None,
     ) -> Camera:
-        dist = None if distortion is None or not any(distortion) else tuple(float(d) for d in distortion)
+        dist = check_distortion(distortion)
         cam = cls(
             int(width),
             int(height),
@@ -185,6 +185,31 @@ class Camera:
             & (y >= -0.5 + margin_px)
             & (y <= self.height - 0.5 - margin_px)
         )
+
+
+DISTORTION_LENGTHS = (4, 5, 8, 12, 14)
+"""Numbers of distortion coefficients OpenCV takes: ``k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]]``."""
+
+
+def check_distortion(values: Any, field: str = "camera.distortion") -> tuple[float, ...] | None:
+    """The Brown-Conrady coefficients ``(k1, k2, p1, p2[, k3])`` of an OpenCV-style list, or None
+    when all are zero. Raises InvalidInputError unless it has 4, 5, 8, 12 or 14 finite values,
+    and unless the terms after ``k3`` (rational, thin-prism, tilt; not modelled) are zero."""
+    if values is None:
+        return None
+    try:
+        coeffs = tuple(float(v) for v in values)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(field, "a list of numbers") from exc
+    if len(coeffs) not in DISTORTION_LENGTHS:
+        raise InvalidInputError(field, f"{len(coeffs)} values; give 4, 5, 8, 12 or 14 as OpenCV takes "
+                                       "(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]])")
+    if not all(math.isfinite(c) for c in coeffs):
+        raise InvalidInputError(field, "values must be finite")
+    if any(coeffs[5:]):
+        raise InvalidInputError(field, "only k1, k2, p1, p2, k3 are modelled; the rational, thin-prism and "
+                                       "tilt terms (values 6 to 14) must be 0")
+    return coeffs[:5] if any(coeffs) else None
 
 
 def _distort(xn: FloatArray, yn: FloatArray, coeffs: tuple[float, ...]) -> tuple[FloatArray, FloatArray]:

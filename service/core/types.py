@@ -66,8 +66,9 @@ class Centroids:
         flux decreasing with their index (the list is taken as brightest first)."""
         try:
             arr = np.asarray(rows, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise InvalidInputError(field_name, "expected a list of [x, y] or [x, y, flux] rows of numbers") from None
+        except (TypeError, ValueError):  # ragged: rows of 2 and of 3 values mixed, or not numbers
+            raise InvalidInputError(field_name, "expected a list of [x, y] or [x, y, flux] rows, "
+                                                "all of the same length") from None
         if arr.size == 0:
             return cls(np.zeros((0, 2)), np.zeros(0))
         if arr.ndim != 2 or arr.shape[1] not in (2, 3):

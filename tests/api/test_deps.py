@@ -49,3 +49,13 @@ def test_websocket_key_by_header_or_query(keyed: LiveServer) -> None:
     with connect(keyed.ws_url + "?api_key=" + KEY.replace(" ", "%20")) as ws:
         ws.send('{"type": "config"}')
         assert '"config"' in ws.recv(timeout=10)
+
+
+def test_openapi_and_docs_are_open_as_documented(keyed: LiveServer) -> None:
+    from pathlib import Path
+
+    with httpx.Client(base_url=keyed.url) as c:
+        assert c.get("/openapi.json").status_code == 200 and c.get("/docs").status_code == 200
+        assert c.get("/v1/info").status_code == 401
+    text = (Path(__file__).resolve().parents[2] / "docs" / "api.md").read_text()
+    assert "`/docs` and `/openapi.json` needs `X-API-Key`" in text.replace("`/v1/health`, ", "")

@@ -11,7 +11,7 @@ from client.models import ErrorResponse, SolveRequest, SolveResult
 
 from ...core import pipeline
 from ...core.centroid import decode_image
-from .. import convert
+from .. import convert, validation
 from ..deps import CamerasDep, NavDbDep, SettingsDep, SolverDep, require_media_type
 from ..errors import ApiError
 
@@ -49,14 +49,16 @@ async def solve_image(
     db: NavDbDep, solver: SolverDep, cameras: CamerasDep, settings: SettingsDep,
     camera: Annotated[str | None, Form(max_length=4096, description=(
         "Camera: a JSON CameraSpec object, or the name of a configured camera. Or give fov_deg."))] = None,
-    fov_deg: Annotated[float | None, Form(gt=0, lt=170, description=(
-        "Horizontal field of view, degrees; camera = this FOV at the image's size, centred."))] = None,
+    fov_deg: Annotated[float | None, Form(gt=0, lt=170, allow_inf_nan=False, description=(
+        "Horizontal field of view, degrees; camera = this FOV at the image's size, centred. "
+        "Give camera or fov_deg, not both."))] = None,
     method: Annotated[str, Form(max_length=32, description="Identification method, or 'auto'.")] = "auto",
     id: Annotated[str | None, Form(max_length=256, description="Echoed back in the result.")] = None,
 ) -> dict[str, Any]:
     """Detect the stars of an uploaded image and identify them."""
     if image.size is not None and image.size > settings.max_image_bytes:
         raise ApiError(413, f"image is {image.size} bytes, the limit is {settings.max_image_bytes}", "image")
+    validation.one_camera(camera, fov_deg)
     data = await image.read()
     convert.check_method(db, method)
     pixels = await solver.run(partial(decode_image, data, max_pixels=settings.max_image_pixels))

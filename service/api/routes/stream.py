@@ -14,9 +14,9 @@ import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import partial
-from typing import Annotated, Any
+from typing import Any
 
-from fastapi import APIRouter, Query, WebSocket
+from fastapi import APIRouter, WebSocket
 from pydantic import ValidationError
 
 from client.models import CameraSpec, SolveRequest, SolveResult, StreamAck, StreamConfig, StreamError
@@ -25,7 +25,7 @@ from ...core import pipeline
 from ...core.centroid import decode_image
 from ...core.errors import SkyfixError
 from ...core.types import Solution
-from .. import convert
+from .. import convert, validation
 from ..deps import API_KEY_HEADER, CamerasDep, NavDbDep, SettingsDep, SolverDep, key_ok
 from ..errors import ApiError, error_status
 from ..pump import pump
@@ -49,20 +49,22 @@ class StreamState:
 
 
 @router.websocket("/stream")
-async def stream(
-    ws: WebSocket, db: NavDbDep, solver: SolverDep, cameras: CamerasDep, settings: SettingsDep,
-    track: Annotated[bool, Query(description="Use each solution as the next frame's attitude hint.")] = False,
-    camera: Annotated[str | None, Query(max_length=4096, description="Image frames: camera JSON or name.")] = None,
-    fov_deg: Annotated[float | None, Query(gt=0, lt=170, description="Image frames: horizontal FOV, deg.")] = None,
-    method: Annotated[str, Query(max_length=32)] = "auto",
-    hint_radius_deg: Annotated[float, Query(gt=0, le=180)] = 5.0,
-    api_key: Annotated[str | None, Query(description="For clients that cannot send X-API-Key.")] = None,
-) -> None:
-    if not key_ok(settings, ws.headers.get(API_KEY_HEADER) or api_key):
+async def stream(ws: WebSocket, db: NavDbDep, solver: SolverDep, cameras: CamerasDep, settings: SettingsDep) -> None:
+    """Query parameters (``validation.StreamQuery``): track, camera, fov_deg, method,
+    hint_radius_deg, api_key. A bad one closes the connection with code 1008 and a reason
+    naming it; a wrong key is refused at the handshake (403)."""
+    if not key_ok(settings, ws.headers.get(API_KEY_HEADER) or ws.query_params.get("api_key")):
         await ws.close(code=1008, reason="missing or wrong API key")
         return
+    try:
+        q = validation.stream_query(ws.query_params, db, cameras)
+    except (ValidationError, SkyfixError) as exc:
+        await ws.accept()
+        await ws.close(code=validation.CLOSE_POLICY, reason=validation.close_reason(exc))
+        return
     await ws.accept()
-    frames = _Frames(db, solver, cameras, settings, StreamState(camera, fov_deg, method, track, hint_radius_deg))
+    frames = _Frames(db, solver, cameras, settings,
+                     StreamState(q.camera, q.fov_deg, q.method, q.track, q.hint_radius_deg))
     await pump(ws, frames.handle, max_in_flight=settings.max_in_flight,
                lifecycle=getattr(ws.app.state, "lifecycle", None))
 
@@ -94,7 +96,7 @@ class _Frames:
                 sol = await self._centroids(SolveRequest.model_validate(obj))
         except (SkyfixError, ValidationError, ApiError) as exc:
             self.solver.metrics.ws_frames[f"{kind}_error"] += 1
-            code, detail, field = error_status(exc)
+            code, detail, field = error_status(exc, self.settings.max_centroids)
             return StreamError(id=frame_id, code=code, detail=detail, field=field).model_dump_json()
         self.solver.metrics.ws_frames[kind] += 1
         if self.state.track:
@@ -136,6 +138,11 @@ class _Frames:
             convert.camera_entry(cfg.camera, "camera")
         elif cfg.camera is not None:
             convert.parse_camera_field(cfg.camera, "camera", self.cameras)
+        validation.one_camera(cfg.camera, cfg.fov_deg)
+        if cfg.camera is not None:  # the latest of camera and fov_deg is the connection's camera
+            st.fov_deg = None
+        if cfg.fov_deg is not None:
+            st.camera = None
         for name in ("camera", "fov_deg", "track", "hint_radius_deg"):
             if getattr(cfg, name) is not None:
                 setattr(st, name, getattr(cfg, name))

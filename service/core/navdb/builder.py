@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..catalog import CATALOGUE_NAME, StarTable, load_hipparcos, select_stars
+from ..errors import InvalidInputError
 from .format import (
     FORMAT_NAME,
     MANIFEST,
@@ -31,6 +32,7 @@ from .format import (
     array_file,
     sha256_file,
 )
+from .integrity import sample_digest
 
 if TYPE_CHECKING:  # the methods import the reader, which this package exports: import them lazily
     from ..methods._pairs import SharedPairs
@@ -81,6 +83,10 @@ class BuildConfig:
     method_params: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
+MIN_STARS = 4
+"""Fewest navigation stars a database may hold (one four-star pattern)."""
+
+
 def _noop(stage: str, frac: float) -> None:
     return None
 
@@ -93,7 +99,8 @@ def _write_array(directory: Path, name: str, arr: np.ndarray) -> dict[str, Any]:
         np.lib.format.write_array(fh, arr, allow_pickle=False)
         fh.flush()
         os.fsync(fh.fileno())
-    return {"file": fname, "dtype": arr.dtype.str, "shape": list(arr.shape), "sha256": sha256_file(fpath)}
+    return {"file": fname, "dtype": arr.dtype.str, "shape": list(arr.shape), "sha256": sha256_file(fpath),
+            "sample_sha256": sample_digest(fpath)}
 
 
 def build_database(out: str | os.PathLike[str], config: BuildConfig, *, progress: Progress = _noop) -> Path:
@@ -181,6 +188,9 @@ def _write_member(directory: Path, config: BuildConfig, progress: Progress) -> d
         density_cap=config.density_cap,
         density_radius_deg=config.density_radius_deg,
     )
+    if len(stars) < MIN_STARS:
+        raise InvalidInputError("mag_limit", f"{len(stars)} stars at V <= {config.mag_limit:g}: a database "
+                                             f"needs at least {MIN_STARS} (a fainter --mag-limit)")
     arrays_meta: dict[str, Any] = {}
     assert stars.pm is not None
     for name, arr in (("stars/hip", stars.hip), ("stars/vec", stars.vec), ("stars/mag", stars.mag),

@@ -6,7 +6,7 @@ import json
 from typing import Any
 
 import pytest
-from websockets.exceptions import InvalidStatus
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
 from client.models import SolveResult, StreamAck, StreamError
@@ -111,6 +111,8 @@ def test_camera_from_query_parameters(server: LiveServer, frames: list[SimFrame]
     assert result["status"] == "solved" and result["method"] == "pyramid", result
 
 
-def test_bad_query_parameter_refuses_the_handshake(server: LiveServer) -> None:
-    with pytest.raises(InvalidStatus), connect(server.ws_url + "?fov_deg=-1"):
-        pass
+def test_bad_query_parameter_closes_with_1008_naming_it(server: LiveServer) -> None:
+    with connect(server.ws_url + "?fov_deg=-1") as ws, pytest.raises(ConnectionClosed) as closed:
+        ws.recv(timeout=10)
+    assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008
+    assert closed.value.rcvd.reason.startswith("fov_deg")

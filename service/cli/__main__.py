@@ -1,0 +1,5 @@
+"""``python -m service.cli``: the ``skyfix`` command."""
+
+from . import main
+
+main()

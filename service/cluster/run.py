@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 import tempfile
 import time
@@ -137,8 +138,10 @@ def reprocess(
             if cluster:
                 own = Client(cluster)
             else:
+                # workers' own logs stay quiet (a worker's last heartbeat racing the shutdown
+                # logs a harmless traceback); the tasks' errors still reach this client
                 lc = LocalCluster(n_workers=local or 1, threads_per_worker=1, processes=True,
-                                  dashboard_address=":0")
+                                  dashboard_address=":0", silence_logs=logging.CRITICAL)
                 own = Client(lc)
             client = own
         try:

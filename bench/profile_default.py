@@ -78,9 +78,10 @@ def main(argv: Sequence[str] | None = None) -> None:
                 sol = solve(c, p.camera, db, options=opts)
                 wall.append((time.perf_counter() - t0) * 1e3)
                 timings.append(sol.timings_ms)
-                methods[sol.method if sol.solved else f"none ({sol.reason.value if sol.reason else '-'})"] += 1
+                reason = getattr(getattr(sol, "reason", None), "value", None)  # older skyfix: no reason
+                methods[sol.method if sol.solved else f"none ({reason or '-'})"] += 1
                 tried = getattr(sol, "methods_tried", ()) or ()
-                fallbacks += len(tried) > 1 or (sol.reason is not None and sol.reason.value == "time_limit")
+                fallbacks += len(tried) > 1 or reason == "time_limit"
             if profiler is not None:
                 profiler.stop()
             print(_row(label, timings, np.array(wall), methods, fallbacks), flush=True)

@@ -42,12 +42,12 @@ def dominant_pairs(obs_xy: FloatArray, free_obs: IntArray, pred_xy: FloatArray, 
     if len(free_obs) == 0 or len(pred_xy) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     wide = crowd * radius_px
-    for i in free_obs:
-        d = np.hypot(pred_xy[:, 0] - obs_xy[i, 0], pred_xy[:, 1] - obs_xy[i, 1])
-        near = np.flatnonzero(d <= wide)
-        within = near[d[near] <= radius_px]
-        if len(within) == 0:
-            continue
+    # distances of every free observed star to every predicted one, at once
+    d = np.hypot(obs_xy[free_obs, 0][:, None] - pred_xy[None, :, 0], obs_xy[free_obs, 1][:, None] - pred_xy[None, :, 1])
+    for k in np.flatnonzero((d <= radius_px).any(axis=1)):
+        i = int(free_obs[k])
+        near = np.flatnonzero(d[k] <= wide)
+        within = near[d[k, near] <= radius_px]
         best = within[np.argmin(pred_mag[within])]
         others = near[near != best]
         if not free_pred[best] or (len(others) and pred_mag[others].min() - pred_mag[best] < min_delta_mag):
@@ -56,7 +56,7 @@ def dominant_pairs(obs_xy: FloatArray, free_obs: IntArray, pred_xy: FloatArray, 
         rivals = np.hypot(obs_xy[:, 0] - pred_xy[best, 0], obs_xy[:, 1] - pred_xy[best, 1]) <= wide
         if rivals.sum() != 1:
             continue
-        out_o.append(int(i))
+        out_o.append(i)
         out_p.append(int(best))
         free_pred[best] = False
     return np.asarray(out_o, np.int64), np.asarray(out_p, np.int64)

@@ -106,7 +106,8 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
     Parameters
     ----------
     frames : iterable of Frame, record (dict) or JSON line (str/bytes)
-        Records and lines are parsed in the workers (:func:`frame_from_record`).
+        Records and lines are parsed in the workers (:func:`frame_from_record`; lines with
+        orjson: strict JSON, no NaN or Infinity literals).
     db : NavDatabase or NavDatabaseSet
         Opened once by the caller; warmed up here once, before the workers start, so every
         worker starts with the compiled kernels and indexes (it is read-only and
@@ -121,16 +122,17 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
         solution (the CLI formats and scores there); ``record`` is the item, parsed if it was a
         JSON line.
     return_errors : bool
-        JSON lines are parsed with orjson (strict JSON: no NaN or Infinity literals).
         An item whose parse or solve raises ``SkyfixError`` (or ``ValueError``, ``KeyError``,
         ``TypeError`` from a malformed line) gets a :class:`FrameError` in its place instead of
         raising.
     pool : {"process", "thread"}
         ``"process"`` (POSIX fork): each worker is a forked copy of this process, truly
-        parallel (from a single-threaded process only; otherwise threads). ``"thread"``: a thread pool; the numba kernels release the GIL, but measured
-        (docs/benchmarks.md, Batch) most of a frame's time is Python around them, so threads
-        gain little.
+        parallel (from a single-threaded process only; otherwise threads). ``"thread"``: a
+        thread pool; the numba kernels release the GIL, but most of a frame's time is Python
+        around them (docs/benchmarks.md, Batch), so threads gain little.
     """
+    if pool not in ("process", "thread"):
+        raise ValueError(f"pool must be 'process' or 'thread', not {pool!r}")
     todo = list(frames)
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

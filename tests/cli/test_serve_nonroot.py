@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -18,7 +17,7 @@ import httpx
 import pytest
 
 from service.core.navdb import BuildConfig, build_database
-from tests.api.conftest import free_port, wait_healthy
+from tests.api.conftest import free_port, stop_serve, wait_healthy
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -104,10 +103,4 @@ def test_serve_as_nobody_becomes_healthy(scratch: Path) -> None:
         health = httpx.get(f"http://127.0.0.1:{port}/v1/health", timeout=5).json()
         assert health["status"] == "ok", health
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGTERM)
-        try:
-            proc.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
+        stop_serve(proc)

@@ -106,7 +106,13 @@ class MaxAngle:
         keys_sorted = keys[key_order]
         ang_by_key = ang[key_order]
         starts = np.searchsorted(p[:, 0], np.arange(n + 1))
-        recs: list[np.ndarray] = []
+        # Each chunk's triangles go straight into their stored form (28 bytes a triangle: key
+        # float64, three int32 ids, c and theta float32), not a float64 record of 48 bytes
+        # concatenated, sorted and copied whole: for a 20-deg d_max at V 6.5 (~78 million
+        # triangles) that took the build to 15.6 GB; this way the peak is the tables, the sort
+        # permutation and one column's copy. The values and their order are unchanged.
+        b_scale = math.radians(d_max_deg) * 1.001
+        parts: dict[str, list[np.ndarray]] = {"key": [], "ids": [], "c": [], "theta": []}
         chunk = max(1, n // 50)
         for s0 in range(0, n, chunk):
             progress("triangles", s0 / n)
@@ -115,13 +121,11 @@ class MaxAngle:
             seg_ang = ang[lo:hi]
             # pairs (i, j), (i, k) with j < k sharing i: all combinations inside each i-group
             g = seg[:, 0]
-            g_start = np.searchsorted(g, g, side="left")
             g_end = np.searchsorted(g, g, side="right")
             cnt = g_end - np.arange(len(g)) - 1  # partners after this row in the same group
             rows = np.repeat(np.arange(len(g)), cnt)
             offs = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
             other = rows + 1 + offs
-            del g_start
             i_ = seg[rows, 0]
             j_ = seg[rows, 1]
             k_ = seg[other, 1]
@@ -133,21 +137,30 @@ class MaxAngle:
             sides, ids = _sorted_sides(d_jk, d_ik, d_ij, i_[hit], j_[hit], k_[hit])
             theta = triangle_features(sides[:, 0], sides[:, 1], sides[:, 2])
             keep = theta < THETA_MAX_USABLE
-            recs.append(np.column_stack([ids[keep].astype(np.float64), sides[keep, 1], sides[keep, 2],
-                                         theta[keep]]))
-        allrec = np.concatenate(recs) if recs else np.zeros((0, 6))
-        b_scale = math.radians(d_max_deg) * 1.001
-        block = np.clip((n_blocks * (allrec[:, 5] - THETA_LO) / THETA_SPAN).astype(np.int64), 0, n_blocks - 1)
-        key = block + allrec[:, 3] / b_scale
-        order = np.argsort(key, kind="stable")
-        allrec, key = allrec[order], key[order]
+            theta = theta[keep]
+            block = np.clip((n_blocks * (theta - THETA_LO) / THETA_SPAN).astype(np.int64), 0, n_blocks - 1)
+            parts["key"].append(block + sides[keep, 1] / b_scale)
+            parts["ids"].append(rows_kept[ids[keep]].astype(np.int32))
+            parts["c"].append(sides[keep, 2].astype(np.float32))
+            parts["theta"].append(theta.astype(np.float32))
+            del rows, offs, other, i_, j_, k_, jj, kk, q, pos, hit, sides, ids, theta, block, keep
+        empty = {"key": np.zeros(0), "ids": np.zeros((0, 3), np.int32), "c": np.zeros(0, np.float32),
+                 "theta": np.zeros(0, np.float32)}
+        tables: dict[str, np.ndarray] = {}
+        for name in ("key", "ids", "c", "theta"):  # one column's pieces in memory twice at most
+            tables[name] = np.concatenate(parts.pop(name)) if len(parts[name]) else empty[name]
+        del pairs, angles, p, ang, keys, key_order, keys_sorted, ang_by_key
+        order = np.argsort(tables["key"], kind="stable")
+        tables["key"] = tables["key"][order]
+        tables["c"] = tables["c"][order]
+        tables["theta"] = tables["theta"][order]
+        ids_sorted = np.empty_like(tables["ids"])
+        for col in range(3):  # a column at a time: the copy is 4 bytes a triangle, not 12
+            ids_sorted[:, col] = tables["ids"][order, col]
+        del order
+        tables["ids"] = ids_sorted
+        key = tables["key"]
         progress(f"{len(key)} triangles", 1.0)
-        tables = {
-            "ids": rows_kept[allrec[:, :3].astype(np.int64)].astype(np.int32),
-            "key": key,
-            "c": allrec[:, 4].astype(np.float32),
-            "theta": allrec[:, 5].astype(np.float32),
-        }
         meta = {"d_max_deg": d_max_deg, "xi_deg": xi_deg, "n_blocks": n_blocks, "b_scale": b_scale,
                 "n_triangles": int(len(key)), "n_pattern_stars": int(n),
                 **{k: params[k] for k in PATTERN_PARAMS if k in params}}

@@ -12,7 +12,7 @@ from service.core.navdb import BuildConfig
 BYTES_PER_TRIANGLE_STORED = 28  # key float64, ids 3 x int32, c and theta float32
 
 
-def test_build_peak_is_under_twice_the_tables() -> None:
+def test_build_peak_is_near_the_tables() -> None:
     config = BuildConfig(fov_max_deg=14.0, fov_min_deg=10.0, mag_limit=6.0, methods=("maxangle",), epoch=2026.0)
     stars = select_stars(load_hipparcos(), epoch=config.epoch, mag_limit=config.mag_limit,
                          double_star_sep_deg=config.double_star_sep_deg)
@@ -25,5 +25,6 @@ def test_build_peak_is_under_twice_the_tables() -> None:
     n = meta["n_triangles"]
     stored = sum(a.nbytes for a in tables.values())
     assert n > 500_000 and stored == n * BYTES_PER_TRIANGLE_STORED
-    # the tables, the sort permutation (8 bytes a triangle) and one column's copy: was ~6x
-    assert peak < 2.0 * stored, f"peak {peak / 1e6:.0f} MB for {stored / 1e6:.0f} MB of tables"
+    # the tables, 5 bytes a triangle for the in-place sort, a chunk: was 6.5x
+    print(f"peak {peak / stored:.2f}x the tables")
+    assert peak < 1.5 * stored, f"peak {peak / 1e6:.0f} MB for {stored / 1e6:.0f} MB of tables"

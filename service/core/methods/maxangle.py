@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from .._malloc import map_large_allocations
 from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
@@ -106,6 +107,7 @@ class MaxAngle:
     def build_tables(
         self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        map_large_allocations()  # freed chunks go back to the system, not to glibc's heap
         d_max_deg = float(params.get("d_max_deg", config.fov_min_deg))
         xi_deg = float(params.get("xi_deg", 0.05))
         n_blocks = int(params.get("n_blocks", 1024))

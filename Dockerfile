@@ -38,11 +38,18 @@ from service.core.pipeline import warm_up; warm_up(open_database(ensure_default_
 
 # ---- runtime ---------------------------------------------------------------------------------
 FROM python:${PYTHON_VERSION}-slim AS runtime
-RUN useradd --system --uid 10001 --user-group --no-create-home --shell /usr/sbin/nologin skyfix
+# A home the user owns (numba, like other libraries, may write under $HOME), and the numba cache
+# owned by the user: numba writes an index beside what it compiled, and compiles again on a CPU
+# unlike the build machine's. Without both, every cached kernel fails at import as non-root
+# ("cannot cache function ...: no locator available"). The code and the database stay root's
+# (read-only to the server); tests/cli/test_serve_nonroot.py starts `skyfix serve` that way.
+RUN useradd --system --uid 10001 --user-group --create-home --home-dir /home/skyfix \
+        --shell /usr/sbin/nologin skyfix
 COPY --from=build /opt/venv /opt/venv
 COPY --from=build /opt/skyfix/db /opt/skyfix/db
-COPY --from=build /opt/skyfix/numba /opt/skyfix/numba
+COPY --from=build --chown=skyfix:skyfix /opt/skyfix/numba /opt/skyfix/numba
 ENV PATH=/opt/venv/bin:$PATH \
+    HOME=/home/skyfix \
     PYTHONUNBUFFERED=1 \
     PYTHONDONTWRITEBYTECODE=1 \
     SKYFIX_HOST=0.0.0.0 \

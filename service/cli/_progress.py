@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+import sys
 from pathlib import Path
 
 from rich.console import Console
@@ -26,9 +27,27 @@ def build_progress(title: str) -> Iterator[Callable[[str, float], None]]:
         task = bar.add_task(title, total=1.0)
 
         def update(stage: str, frac: float) -> None:
-            bar.update(task, completed=frac, description=f"{title}: {stage}")
+            bar.update(task, completed=frac, description=f"{title}: {stage} (peak {peak_memory()})")
 
         yield update
+
+
+def peak_memory_bytes() -> int | None:
+    """This process's peak resident memory so far, bytes (None where the OS does not say)."""
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - Windows
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(peak) if sys.platform == "darwin" else int(peak) * 1024  # macOS: bytes; Linux: KiB
+
+
+def peak_memory() -> str:
+    """``peak_memory_bytes`` for people: ``"412 MB"``, ``"3.1 GB"``."""
+    peak = peak_memory_bytes()
+    if peak is None:
+        return "unknown"
+    return f"{peak / 1e9:.1f} GB" if peak >= 1e9 else f"{peak / 1e6:.0f} MB"
 
 
 def resolve_db(path: Path | None) -> Path:

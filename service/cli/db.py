@@ -9,7 +9,7 @@ from typing import Annotated, Any
 
 import typer
 
-from ._progress import build_progress, err_console, resolve_db
+from ._progress import build_progress, err_console, peak_memory, resolve_db
 
 app = typer.Typer(help="Build, inspect and verify navigation databases.", no_args_is_help=True)
 
@@ -49,7 +49,7 @@ def build(
     t0 = time.perf_counter()
     with build_progress(str(out)) as cb:
         build_database(out, cfg, progress=cb)
-    err_console.print(f"built {out} in {time.perf_counter() - t0:.1f} s")
+    err_console.print(f"built {out} in {time.perf_counter() - t0:.1f} s, peak memory {peak_memory()}")
 
 
 @app.command()

@@ -2,3 +2,7 @@
 
 Nothing here imports FastAPI, pydantic, httpx or the ``client`` package (a test pins it).
 """
+
+from ._numba_cache import ensure_writable_cache as _ensure_writable_cache
+
+_ensure_writable_cache()  # before any kernel module imports numba (read-only installs, no home)

@@ -26,7 +26,7 @@ def small_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("cli") / "db"
     proc = run("db", "build", "--out", str(out), "--fov-max", "12.5", "--fov-min", "8.5", "--mag-limit", "6.5",
                "--methods", "maxangle,pyramid", "--epoch", "2026.0")
-    assert "built" in proc.stderr
+    assert "built" in proc.stderr and "peak memory" in proc.stderr  # issue 12: the build shows its peak
     return out
 
 

@@ -29,11 +29,13 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from .._malloc import map_large_allocations
 from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
 from ..screen import triple_product
 from ..verify import Verified
+from ._bucket_sort import sort_by_bucket_key
 from ._pairs import build_pair_table, pattern_order
 from .base import Progress, SolveContext
 
@@ -58,6 +60,46 @@ def _sorted_sides(d_jk: np.ndarray, d_ik: np.ndarray, d_ij: np.ndarray, i: np.nd
     return np.take_along_axis(sides, order, 1), np.take_along_axis(ids, order, 1)
 
 
+def _concat_consuming(pieces: list[np.ndarray], empty: np.ndarray) -> np.ndarray:
+    """``np.concatenate(pieces)``, emptying ``pieces`` as it goes: each piece is freed once
+    copied, so the memory held is the result plus one piece (not the pieces and the result)."""
+    if not pieces:
+        return empty
+    out = np.empty((sum(len(x) for x in pieces), *pieces[0].shape[1:]), dtype=pieces[0].dtype)
+    pos = 0
+    while pieces:
+        x = pieces.pop(0)
+        out[pos:pos + len(x)] = x
+        pos += len(x)
+        del x
+    return out
+
+
+PATTERN_PARAMS = ("pattern_mag_limit", "pattern_cap", "pattern_radius_deg")
+
+
+def pattern_stars(stars: StarTable, params: dict[str, Any]) -> np.ndarray:
+    """Rows of ``stars`` (brightest first) that the triangles are made of: all of them, or those
+    at most ``pattern_mag_limit`` (V) and, with ``pattern_cap``, having fewer than that many
+    brighter pattern stars within ``pattern_radius_deg``. A database whose table must reach
+    across a wide field (``d_max_deg``) keeps it tractable this way: a camera forms its
+    triangles of its brightest stars only, which such a cap keeps."""
+    from scipy.spatial import cKDTree
+
+    from ..geometry import chord_from_angle
+
+    keep = np.ones(len(stars.vec), dtype=bool)
+    if "pattern_mag_limit" in params:
+        keep &= np.asarray(stars.mag) <= float(params["pattern_mag_limit"])
+    rows = np.flatnonzero(keep)
+    if "pattern_cap" in params and len(rows):
+        radius = chord_from_angle(math.radians(float(params.get("pattern_radius_deg", 5.0))))
+        pairs = cKDTree(stars.vec[rows]).query_pairs(float(radius), output_type="ndarray")
+        brighter = np.bincount(pairs.max(axis=1), minlength=len(rows)) if len(pairs) else np.zeros(len(rows), int)
+        rows = rows[brighter < int(params["pattern_cap"])]
+    return rows.astype(np.int64)
+
+
 class MaxAngle:
     name = "maxangle"
     summary = "triangles hashed by their maximum interior angle into N blocks (seed 000)"
@@ -65,10 +107,12 @@ class MaxAngle:
     def build_tables(
         self, stars: StarTable, config: Any, params: dict[str, Any], progress: Progress
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        map_large_allocations()  # freed chunks go back to the system, not to glibc's heap
         d_max_deg = float(params.get("d_max_deg", config.fov_min_deg))
         xi_deg = float(params.get("xi_deg", 0.05))
         n_blocks = int(params.get("n_blocks", 1024))
-        vec = stars.vec
+        rows_kept = pattern_stars(stars, params)
+        vec = stars.vec[rows_kept]
         n = len(vec)
         pairs, angles = build_pair_table(vec, math.radians(d_max_deg), math.radians(xi_deg))
         # adjacency with the lower index first; group by the lower index
@@ -80,7 +124,13 @@ class MaxAngle:
         keys_sorted = keys[key_order]
         ang_by_key = ang[key_order]
         starts = np.searchsorted(p[:, 0], np.arange(n + 1))
-        recs: list[np.ndarray] = []
+        # Each chunk's triangles go straight into their stored form (28 bytes a triangle: key
+        # float64, three int32 ids, c and theta float32), not a float64 record of 48 bytes
+        # concatenated, sorted and copied whole: for a 20-deg d_max at V 6.5 (~78 million
+        # triangles) that took the build to 15.6 GB; this way the peak is the tables plus a few
+        # bytes a triangle for the sort. The values and their order are unchanged.
+        b_scale = math.radians(d_max_deg) * 1.001
+        parts: dict[str, list[np.ndarray]] = {"key": [], "ids": [], "c": [], "theta": []}
         chunk = max(1, n // 50)
         for s0 in range(0, n, chunk):
             progress("triangles", s0 / n)
@@ -89,13 +139,11 @@ class MaxAngle:
             seg_ang = ang[lo:hi]
             # pairs (i, j), (i, k) with j < k sharing i: all combinations inside each i-group
             g = seg[:, 0]
-            g_start = np.searchsorted(g, g, side="left")
             g_end = np.searchsorted(g, g, side="right")
             cnt = g_end - np.arange(len(g)) - 1  # partners after this row in the same group
             rows = np.repeat(np.arange(len(g)), cnt)
             offs = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
             other = rows + 1 + offs
-            del g_start
             i_ = seg[rows, 0]
             j_ = seg[rows, 1]
             k_ = seg[other, 1]
@@ -107,23 +155,25 @@ class MaxAngle:
             sides, ids = _sorted_sides(d_jk, d_ik, d_ij, i_[hit], j_[hit], k_[hit])
             theta = triangle_features(sides[:, 0], sides[:, 1], sides[:, 2])
             keep = theta < THETA_MAX_USABLE
-            recs.append(np.column_stack([ids[keep].astype(np.float64), sides[keep, 1], sides[keep, 2],
-                                         theta[keep]]))
-        allrec = np.concatenate(recs) if recs else np.zeros((0, 6))
-        b_scale = math.radians(d_max_deg) * 1.001
-        block = np.clip((n_blocks * (allrec[:, 5] - THETA_LO) / THETA_SPAN).astype(np.int64), 0, n_blocks - 1)
-        key = block + allrec[:, 3] / b_scale
-        order = np.argsort(key, kind="stable")
-        allrec, key = allrec[order], key[order]
+            theta = theta[keep]
+            block = np.clip((n_blocks * (theta - THETA_LO) / THETA_SPAN).astype(np.int64), 0, n_blocks - 1)
+            parts["key"].append(block + sides[keep, 1] / b_scale)
+            parts["ids"].append(rows_kept[ids[keep]].astype(np.int32))
+            parts["c"].append(sides[keep, 2].astype(np.float32))
+            parts["theta"].append(theta.astype(np.float32))
+            del rows, offs, other, i_, j_, k_, jj, kk, q, pos, hit, sides, ids, theta, block, keep
+        empty = {"key": np.zeros(0), "ids": np.zeros((0, 3), np.int32), "c": np.zeros(0, np.float32),
+                 "theta": np.zeros(0, np.float32)}
+        tables = {name: _concat_consuming(parts[name], empty[name]) for name in ("key", "ids", "c", "theta")}
+        del pairs, angles, p, ang, keys, key_order, keys_sorted, ang_by_key
+        # key = block + side / b_scale with the fraction below 1: sorted in place, bucket by
+        # bucket, with 5 bytes a triangle beside the tables (np.argsort and copies took 16)
+        sort_by_bucket_key(tables["key"], [tables["ids"], tables["c"], tables["theta"]], n_blocks)
+        key = tables["key"]
         progress(f"{len(key)} triangles", 1.0)
-        tables = {
-            "ids": allrec[:, :3].astype(np.int32),
-            "key": key,
-            "c": allrec[:, 4].astype(np.float32),
-            "theta": allrec[:, 5].astype(np.float32),
-        }
         meta = {"d_max_deg": d_max_deg, "xi_deg": xi_deg, "n_blocks": n_blocks, "b_scale": b_scale,
-                "n_triangles": int(len(key))}
+                "n_triangles": int(len(key)), "n_pattern_stars": int(n),
+                **{k: params[k] for k in PATTERN_PARAMS if k in params}}
         return tables, meta
 
     def matcher(self, db: NavDatabase) -> MaxAngleMatcher:

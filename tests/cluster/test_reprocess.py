@@ -16,6 +16,7 @@ import pytest
 distributed = pytest.importorskip("distributed")
 
 from service.cluster import plan_partitions, reprocess  # noqa: E402
+from service.cluster.run import _recorded  # noqa: E402
 from service.cluster.work import DatabasePlugin, solve_partition  # noqa: E402
 from service.core.sim import SimConfig, simulate_frames  # noqa: E402
 from tests.conftest import SEED000_CAMERA  # noqa: E402
@@ -64,6 +65,12 @@ def test_output_equals_skyfix_solve_frame_for_frame(tmp_path: Path, recording: P
     manifest = json.loads((tmp_path / "out" / "manifest.json").read_text())
     assert [p["status"] for p in manifest["partitions"]] == ["done"] * 5
     assert sum(p["frames"] for p in manifest["partitions"]) == N
+    assert [(p["first_id"], p["last_id"], p["start"]) for p in manifest["partitions"]][:2] == \
+        [(0, 49, 0), (50, 99, manifest["partitions"][0]["end"])]
+    assert not (tmp_path / "out" / "journal.jsonl").exists()  # folded into the manifest
+    with pytest.raises(ValueError, match=r"other settings \(method 'auto' there, 'maxangle' now"):
+        reprocess([recording], tmp_path / "out", db=seed000_db.path, method="maxangle", partition_frames=50,
+                  client=client)
 
 
 def test_worker_killed_mid_run_leaves_every_frame_once(tmp_path: Path, recording: Path, client, seed000_db) -> None:
@@ -78,6 +85,8 @@ def test_worker_killed_mid_run_leaves_every_frame_once(tmp_path: Path, recording
     pids = client.run(os.getpid)
     victim = sorted(pids.values())[0]
     os.kill(victim, signal.SIGKILL)  # a worker process dies with partitions in hand
+    finished_at_kill = len(list(out.glob("part-*.jsonl")))
+    assert run.is_alive() and finished_at_kill < N // 10, "the worker was not killed mid-run"
     run.join(timeout=120)
     assert not run.is_alive() and "s" in result
     ids = [r["id"] for r in _outputs(out)]
@@ -110,11 +119,7 @@ def test_interrupted_run_resumes_without_redoing_verified_partitions(tmp_path: P
     done: list = []
     try:
         while time.time() < deadline:
-            try:
-                manifest = json.loads((out / "manifest.json").read_text())
-                done = [p for p in manifest["partitions"] if p.get("status") == "done"]
-            except (OSError, ValueError):
-                pass
+            done = list(_recorded(out)[1].values())  # the manifest and the journal
             if len(done) >= 2 or proc.poll() is not None:
                 break
             time.sleep(0.05)

@@ -45,6 +45,7 @@ class DatabasePlugin(WorkerPlugin):
         from service.core.pipeline import warm_up
 
         where = self.path or "the default database"
+        worker.skyfix_db = None  # a plugin registered again must not leave the previous database
         try:
             path = Path(self.path) if self.path else ensure_default_database()
             where = str(path)

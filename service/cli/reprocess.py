@@ -45,10 +45,13 @@ def reprocess_recordings(
     with Progress(TextColumn("reprocess"), BarColumn(), TextColumn("{task.completed:.0f}/{task.total} frames"),
                   TextColumn("{task.fields[rate]:,.0f} frames/s"), TimeRemainingColumn(),
                   console=err_console, transient=False) as bar:
-        task = bar.add_task("reprocess", total=None, rate=0.0)
+        task = None
 
-        def tick(done: int, total: int, elapsed: float) -> None:
-            bar.update(task, completed=done, total=total, rate=done / max(elapsed, 1e-9))
+        def tick(done: int, total: int, run_frames: int, elapsed: float) -> None:
+            nonlocal task
+            if task is None:  # partitions already done count from the start, not in the rate
+                task = bar.add_task("reprocess", total=total, completed=done, rate=0.0)
+            bar.update(task, completed=done, rate=run_frames / max(elapsed, 1e-9))
 
         try:
             summary = reprocess(paths, out, cluster=cluster, local=local, db=db, method=method, sigma=sigma,

@@ -1,4 +1,15 @@
-"""The client side of a reprocessing campaign: plan, skip what is done, submit, record."""
+"""The client side of a reprocessing campaign: plan, skip what is done, submit, record.
+
+The campaign's record in ``out``:
+
+- ``manifest.json``: the settings (inputs, database checksum, method, sigma, partition size)
+  and every partition (file, byte range, lines; once done: output file, sha256, counts, frame
+  ids). Written atomically at the start, at most every ``MANIFEST_EVERY_S`` during the run, and
+  at the end.
+- ``journal.jsonl``: one line a finished partition, appended and fsynced as it finishes (a
+  constant cost a partition, where rewriting the manifest each time would grow with the
+  campaign). Folded into the manifest at the end and removed.
+"""
 
 from __future__ import annotations
 
@@ -18,11 +29,15 @@ import numpy as np
 from .partition import Partition, plan_partitions
 
 MANIFEST = "manifest.json"
+JOURNAL = "journal.jsonl"
+MANIFEST_EVERY_S = 30.0
+COUNTS = ("frames", "solved", "no_solution", "errors", "wrong", "checked")
 
 
 @dataclass
 class ReprocessSummary:
-    """What a campaign did: partitions run and skipped, frame counts, solve-time percentiles."""
+    """What a campaign did: partitions run and skipped, frame counts (the whole campaign's,
+    skipped partitions included), solve-time percentiles (ms, the frames solved in this run)."""
 
     partitions: int = 0
     skipped: int = 0
@@ -33,11 +48,12 @@ class ReprocessSummary:
     wrong: int = 0
     checked: int = 0
     wall_s: float = 0.0
+    run_frames: int = 0
     ms_percentiles: dict[str, float] = field(default_factory=dict)
 
     def line(self) -> str:
         pct = self.ms_percentiles
-        rate = self.frames / self.wall_s if self.wall_s > 0 else 0.0
+        rate = self.run_frames / self.wall_s if self.wall_s > 0 else 0.0
         return (f"{self.solved}/{self.frames} identified ({100 * self.solved / max(self.frames, 1):.1f}%), "
                 f"{self.no_solution} no_solution, {self.errors} error records, {self.wrong} wrong of {self.checked} "
                 f"with truth; solve ms p50 {pct.get('p50', 0):.2f} p95 {pct.get('p95', 0):.2f} p99 "
@@ -55,25 +71,74 @@ def _write_json(path: Path, data: Any) -> None:
 
 
 def _sha256(path: Path) -> str | None:
+    h = hashlib.sha256()
     try:
-        return hashlib.sha256(path.read_bytes()).hexdigest()
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
     except OSError:
         return None
+    return h.hexdigest()
 
 
-def done_partitions(out: Path, parts: Sequence[Partition]) -> dict[int, dict[str, Any]]:
-    """Partitions of ``parts`` whose output exists and matches the manifest's checksum."""
+def _recorded(out: Path) -> tuple[dict[str, Any] | None, dict[str, dict[str, Any]]]:
+    """The manifest in ``out`` (None if none) and its finished partitions by key, the
+    journal's included (a torn last line, from a client killed mid-write, is ignored)."""
     try:
         manifest = json.loads((out / MANIFEST).read_text())
     except (OSError, ValueError):
-        return {}
-    recorded = {p["key"]: p for p in manifest.get("partitions", []) if isinstance(p, dict) and "key" in p}
+        return None, {}
+    recs = {p["key"]: p for p in manifest.get("partitions", []) if isinstance(p, dict)
+            and p.get("status") == "done" and "key" in p}
+    try:
+        with open(out / JOURNAL, "rb") as fh:
+            for line in fh:
+                try:
+                    rec = json.loads(line)
+                except ValueError:
+                    continue
+                if isinstance(rec, dict) and "key" in rec:
+                    recs[rec["key"]] = {**rec, "status": "done"}
+    except OSError:
+        pass
+    return manifest, recs
+
+
+SETTINGS = ("method", "sigma_px", "partition_frames")
+
+
+def check_same_campaign(manifest: dict[str, Any] | None, settings: dict[str, Any], out: Path) -> None:
+    """Refuse to resume in ``out`` a campaign of other settings or another database (its
+    finished partitions would be mixed with this run's)."""
+    if manifest is None:
+        return
+    theirs = {k: manifest.get(k) for k in SETTINGS}
+    theirs["database checksum"] = (manifest.get("database") or {}).get("checksum")
+    ours = {k: settings[k] for k in SETTINGS}
+    ours["database checksum"] = settings["database"]["checksum"]
+    diff = [f"{k} {theirs[k]!r} there, {ours[k]!r} now" for k in ours if theirs[k] != ours[k]]
+    if diff:
+        raise ValueError(f"{out} holds a campaign of other settings ({'; '.join(diff)}): "
+                         "give a new --out, or remove that directory to start again")
+
+
+def done_partitions(out: Path, parts: Sequence[Partition]) -> dict[int, dict[str, Any]]:
+    """Partitions of ``parts`` recorded as done whose output exists and matches its sha256."""
+    _, recorded = _recorded(out)
     done = {}
     for part in parts:
         rec = recorded.get(part.key)
         if rec and rec.get("output") == part.output_name and _sha256(out / part.output_name) == rec.get("sha256"):
             done[part.index] = rec
     return done
+
+
+def _task_key(part: Partition, out: Path, settings: dict[str, Any]) -> str:
+    """A Dask key unique to this partition of this campaign (two campaigns on one client,
+    e.g. in a notebook, never share a task)."""
+    ident = json.dumps([part.key, str(out), settings["method"], settings["sigma_px"],
+                        settings["database"]["checksum"]])
+    return f"skyfix-part-{part.index:05d}-{hashlib.sha256(ident.encode()).hexdigest()[:16]}"
 
 
 def reprocess(
@@ -86,7 +151,7 @@ def reprocess(
     method: str = "auto",
     sigma: float = 1.0,
     partition_frames: int = 5000,
-    progress: Callable[[int, int, float], None] | None = None,
+    progress: Callable[[int, int, int, float], None] | None = None,
     client: Any = None,
 ) -> ReprocessSummary:
     """Solve every frame of ``inputs`` into ``out`` (``part-NNNNN.jsonl`` + ``manifest.json``).
@@ -99,8 +164,17 @@ def reprocess(
     local : the number of worker processes of a ``LocalCluster`` started here (default 1)
     db : database every worker can read (None: the default database, built by each worker)
     partition_frames : lines a partition holds at most
-    progress : ``progress(frames_done, frames_total, elapsed_s)`` after each partition
+    progress : ``progress(frames_done, frames_total, frames_this_run, elapsed_s)`` at the start
+        and after each partition (frames of skipped partitions count as done, not as this run's)
     client : an existing ``distributed.Client`` (tests, notebooks), instead of cluster/local
+
+    Raises
+    ------
+    ValueError
+        ``out`` holds a campaign of other settings or another database.
+    RuntimeError
+        A partition failed on every try (e.g. a worker cannot open the database: the message
+        names the worker and the path).
     """
     from distributed import Client, LocalCluster, as_completed
 
@@ -109,28 +183,37 @@ def reprocess(
     from .work import DatabasePlugin, database_checksum, solve_partition
 
     t0 = time.perf_counter()
-    out = Path(out)
+    out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
+    for stale in out.glob(".part-*.tmp"):  # left by a worker killed mid-write
+        stale.unlink(missing_ok=True)
     parts = plan_partitions(inputs, partition_frames)
-    done = done_partitions(out, parts)
     db_path = Path(db).resolve() if db is not None else ensure_default_database()
     checksum = database_checksum(db_path)
-    manifest: dict[str, Any] = {
+    settings: dict[str, Any] = {
         "format": "skyfix-reprocess", "inputs": [str(Path(p).resolve()) for p in inputs],
         "database": {"path": str(db_path) if db is not None else "default", "checksum": checksum},
         "method": method, "sigma_px": sigma, "partition_frames": partition_frames,
-        "partitions": [{**p.to_dict(), "key": p.key, **done[p.index]} if p.index in done else
-                       {**p.to_dict(), "key": p.key, "status": "pending"} for p in parts],
     }
-    for rec in manifest["partitions"]:
+    old, _ = _recorded(out)
+    check_same_campaign(old, settings, out)
+    done = done_partitions(out, parts)
+    records = [{**p.to_dict(), "key": p.key, **done[p.index], "status": "done"} if p.index in done else
+               {**p.to_dict(), "key": p.key, "status": "pending"} for p in parts]
+    for rec in records:
         rec.pop("ms", None)
+    manifest = {**settings, "partitions": records}
     _write_json(out / MANIFEST, manifest)
+    (out / JOURNAL).unlink(missing_ok=True)  # its records are in the manifest now
     todo = [p for p in parts if p.index not in done]
     summary = ReprocessSummary(partitions=len(todo), skipped=len(done))
     for rec in done.values():
-        for k in ("frames", "solved", "no_solution", "errors", "wrong", "checked"):
+        for k in COUNTS:
             setattr(summary, k, getattr(summary, k) + int(rec.get(k, 0)))
     total = sum(p.lines for p in parts)
+    frames_done = sum(p.lines for p in parts if p.index in done)
+    if progress is not None:
+        progress(frames_done, total, 0, 0.0)
     ms: list[float] = []
     own = None
     if todo:
@@ -144,22 +227,32 @@ def reprocess(
                                   dashboard_address=":0", silence_logs=logging.CRITICAL)
                 own = Client(lc)
             client = own
+        t_run = time.perf_counter()
         try:
             client.register_plugin(DatabasePlugin(None if db is None else str(db_path), checksum))
-            futures = {client.submit(solve_partition, p.to_dict(), str(out.resolve()), method, sigma,
-                                     key=f"skyfix-part-{p.key}", pure=False, retries=3): p for p in todo}
-            frames_done = summary.frames
-            for fut in as_completed(futures):
-                res = fut.result()  # a partition that failed on every retry raises here
-                ms += res.pop("ms")
-                rec = manifest["partitions"][res["index"]]
-                rec.update(res, status="done")
-                _write_json(out / MANIFEST, manifest)
-                for k in ("frames", "solved", "no_solution", "errors", "wrong", "checked"):
-                    setattr(summary, k, getattr(summary, k) + int(res[k]))
-                frames_done += futures[fut].lines
-                if progress is not None:
-                    progress(frames_done, total, time.perf_counter() - t0)
+            futures = {client.submit(solve_partition, p.to_dict(), str(out), method, sigma,
+                                     key=_task_key(p, out, settings), pure=False, retries=2): p for p in todo}
+            last_manifest = time.monotonic()
+            with open(out / JOURNAL, "a") as journal:
+                for fut in as_completed(futures):
+                    res = fut.result()  # a partition that failed on every try raises here
+                    ms += res.pop("ms")
+                    rec = manifest["partitions"][res["index"]]
+                    rec.update(res, status="done")
+                    journal.write(json.dumps(rec) + "\n")
+                    journal.flush()
+                    os.fsync(journal.fileno())
+                    for k in COUNTS:
+                        setattr(summary, k, getattr(summary, k) + int(res[k]))
+                    summary.run_frames += int(res["frames"])
+                    frames_done += futures[fut].lines
+                    if time.monotonic() - last_manifest > MANIFEST_EVERY_S:
+                        _write_json(out / MANIFEST, manifest)
+                        last_manifest = time.monotonic()
+                    if progress is not None:
+                        progress(frames_done, total, summary.run_frames, time.perf_counter() - t_run)
+            _write_json(out / MANIFEST, manifest)
+            (out / JOURNAL).unlink(missing_ok=True)
         finally:
             if own is not None:
                 cluster_obj = own.cluster

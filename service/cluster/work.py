@@ -45,6 +45,7 @@ class DatabasePlugin(WorkerPlugin):
         from service.core.pipeline import warm_up
 
         where = self.path or "the default database"
+        worker.skyfix_db = None  # a plugin registered again must not leave the previous database
         try:
             path = Path(self.path) if self.path else ensure_default_database()
             where = str(path)
@@ -79,13 +80,13 @@ def solve_partition(part: dict[str, Any], out_dir: str, method: str, sigma: floa
     db = _worker_db()
     numbered = [(p.first_line + i, line) for i, line in enumerate(read_lines(p)) if line.strip()]
 
-    def answer(rec: Any, sol: Any) -> tuple[str, bool, bool | None, float]:
+    def answer(rec: Any, sol: Any) -> tuple[str, bool, bool | None, float, Any]:
         return (json.dumps(sol.to_dict(rec.get("id"))), sol.solved, correct_against_record(rec, sol),
-                sol.timings_ms.get("total", 0.0))
+                sol.timings_ms.get("total", 0.0), rec.get("id"))
 
     results = solve_many([line for _, line in numbered], db, method=method,
                          options=SolveOptions(centroid_sigma_px=sigma), workers=1, then=answer, return_errors=True)
-    out, ms = [], []
+    out, ms, ids = [], [], []
     solved = wrong = checked = errors = 0
     for (lineno, _), res in zip(numbered, results, strict=True):
         if isinstance(res, FrameError):
@@ -93,8 +94,9 @@ def solve_partition(part: dict[str, Any], out_dir: str, method: str, sigma: floa
             out.append(json.dumps({"status": "error", "file": p.path, "line": lineno, "error": res.message,
                                    "field": res.field}))
             continue
-        text, ok, correct, t = res
+        text, ok, correct, t, fid = res
         out.append(text)
+        ids.append(fid)
         solved += ok
         ms.append(t)
         if correct is not None:
@@ -110,4 +112,5 @@ def solve_partition(part: dict[str, Any], out_dir: str, method: str, sigma: floa
     os.replace(tmp, target)
     return {"index": p.index, "key": p.key, "output": p.output_name, "sha256": hashlib.sha256(data).hexdigest(),
             "frames": len(numbered), "solved": solved, "no_solution": len(numbered) - solved - errors,
-            "errors": errors, "wrong": wrong, "checked": checked, "ms": ms, "worker": get_worker().address}
+            "errors": errors, "wrong": wrong, "checked": checked, "ms": ms,
+            "first_id": ids[0] if ids else None, "last_id": ids[-1] if ids else None, "worker": get_worker().address}

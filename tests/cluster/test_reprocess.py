@@ -16,6 +16,7 @@ import pytest
 distributed = pytest.importorskip("distributed")
 
 from service.cluster import plan_partitions, reprocess  # noqa: E402
+from service.cluster.run import _recorded  # noqa: E402
 from service.cluster.work import DatabasePlugin, solve_partition  # noqa: E402
 from service.core.sim import SimConfig, simulate_frames  # noqa: E402
 from tests.conftest import SEED000_CAMERA  # noqa: E402
@@ -64,6 +65,12 @@ def test_output_equals_skyfix_solve_frame_for_frame(tmp_path: Path, recording: P
     manifest = json.loads((tmp_path / "out" / "manifest.json").read_text())
     assert [p["status"] for p in manifest["partitions"]] == ["done"] * 5
     assert sum(p["frames"] for p in manifest["partitions"]) == N
+    assert [(p["first_id"], p["last_id"], p["start"]) for p in manifest["partitions"]][:2] == \
+        [(0, 49, 0), (50, 99, manifest["partitions"][0]["end"])]
+    assert not (tmp_path / "out" / "journal.jsonl").exists()  # folded into the manifest
+    with pytest.raises(ValueError, match=r"other settings \(method 'auto' there, 'maxangle' now"):
+        reprocess([recording], tmp_path / "out", db=seed000_db.path, method="maxangle", partition_frames=50,
+                  client=client)
 
 
 def test_worker_killed_mid_run_leaves_every_frame_once(tmp_path: Path, recording: Path, client, seed000_db) -> None:
@@ -78,6 +85,8 @@ def test_worker_killed_mid_run_leaves_every_frame_once(tmp_path: Path, recording
     pids = client.run(os.getpid)
     victim = sorted(pids.values())[0]
     os.kill(victim, signal.SIGKILL)  # a worker process dies with partitions in hand
+    finished_at_kill = len(list(out.glob("part-*.jsonl")))
+    assert run.is_alive() and finished_at_kill < N // 10, "the worker was not killed mid-run"
     run.join(timeout=120)
     assert not run.is_alive() and "s" in result
     ids = [r["id"] for r in _outputs(out)]
@@ -103,37 +112,34 @@ def test_corrupt_frame_gets_an_error_record(tmp_path: Path, recording: Path, cli
 def test_interrupted_run_resumes_without_redoing_verified_partitions(tmp_path: Path, recording: Path, client,
                                                                       seed000_db) -> None:
     out = tmp_path / "out"
-    proc = subprocess.Popen([*SKYFIX, "reprocess", str(recording), "--out", str(out), "--local", "1",
-                             "--db", str(seed000_db.path), "--partition-frames", "20"],
+    # the client is a separate `skyfix reprocess` on the running cluster, killed mid-run
+    proc = subprocess.Popen([*SKYFIX, "reprocess", str(recording), "--out", str(out), "--cluster",
+                             client.cluster.scheduler_address,
+                             "--db", str(seed000_db.path), "--partition-frames", "5"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 90
     done: list = []
     try:
         while time.time() < deadline:
-            try:
-                manifest = json.loads((out / "manifest.json").read_text())
-                done = [p for p in manifest["partitions"] if p.get("status") == "done"]
-            except (OSError, ValueError):
-                pass
+            done = list(_recorded(out)[1].values())  # the manifest and the journal
             if len(done) >= 2 or proc.poll() is not None:
                 break
-            time.sleep(0.05)
+            time.sleep(0.01)
     finally:
-        os.killpg(proc.pid, signal.SIGKILL)  # the client and its local workers
+        os.killpg(proc.pid, signal.SIGKILL)  # the client; the cluster runs on
         proc.wait(timeout=30)
-    assert 2 <= len(done) < 12, "the run was not interrupted mid-way"
+    assert 2 <= len(done) < 48, "the run was not interrupted mid-way"
     before = {p["output"]: (out / p["output"]).stat().st_mtime_ns for p in done}
-    summary = reprocess([recording], out, db=seed000_db.path, partition_frames=20, client=client)
-    assert summary.skipped >= len(done) and summary.skipped + summary.partitions == 12
+    summary = reprocess([recording], out, db=seed000_db.path, partition_frames=5, client=client)
+    assert summary.skipped >= len(done) and summary.skipped + summary.partitions == 48
     assert all((out / name).stat().st_mtime_ns == t for name, t in before.items())  # not redone
     assert sorted(r["id"] for r in _outputs(out)) == list(range(N))
 
 
-def test_missing_database_on_a_worker_names_the_worker_and_path(recording: Path, tmp_path: Path) -> None:
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0")
-    with distributed.Client(cluster) as c:
-        c.register_plugin(DatabasePlugin(str(tmp_path / "nowhere"), "0" * 64))
-        part = plan_partitions([recording], 10)[0]
-        with pytest.raises(RuntimeError, match=r"worker tcp://.*nowhere"):
-            c.submit(solve_partition, part.to_dict(), str(tmp_path), "auto", 1.0).result(timeout=60)
-    cluster.close()
+def test_missing_database_on_a_worker_names_the_worker_and_path(recording: Path, tmp_path: Path, client) -> None:
+    # the shared cluster's workers get a plugin for a path that does not exist (every
+    # reprocess call registers its own plugin again, replacing this one)
+    client.register_plugin(DatabasePlugin(str(tmp_path / "nowhere"), "0" * 64))
+    part = plan_partitions([recording], 10)[0]
+    with pytest.raises(RuntimeError, match=r"worker tcp://\S+: cannot use the navigation database at \S*nowhere"):
+        client.submit(solve_partition, part.to_dict(), str(tmp_path), "auto", 1.0, pure=False).result(timeout=60)

@@ -29,6 +29,7 @@ from .. import convert
 from ..deps import API_KEY_HEADER, CamerasDep, NavDbDep, SettingsDep, SolverDep, key_ok
 from ..errors import ApiError, error_status
 from ..pump import pump
+from ..sessions import SESSION_NAME, get_hub, publishing
 from ..settings import Settings
 from ..solver import Solver
 
@@ -57,13 +58,16 @@ async def stream(
     method: Annotated[str, Query(max_length=32)] = "auto",
     hint_radius_deg: Annotated[float, Query(gt=0, le=180)] = 5.0,
     api_key: Annotated[str | None, Query(description="For clients that cannot send X-API-Key.")] = None,
+    session: Annotated[str | None, Query(pattern=SESSION_NAME.pattern, description=(
+        "Publish every reply to the viewers of this session (WS /v1/sessions/{session}/watch)."))] = None,
 ) -> None:
     if not key_ok(settings, ws.headers.get(API_KEY_HEADER) or api_key):
         await ws.close(code=1008, reason="missing or wrong API key")
         return
     await ws.accept()
     frames = _Frames(db, solver, cameras, settings, StreamState(camera, fov_deg, method, track, hint_radius_deg))
-    await pump(ws, frames.handle, max_in_flight=settings.max_in_flight,
+    handle = frames.handle if session is None else publishing(frames.handle, get_hub(ws), session)
+    await pump(ws, handle, max_in_flight=settings.max_in_flight,
                lifecycle=getattr(ws.app.state, "lifecycle", None))
 
 

@@ -16,7 +16,9 @@
   function chart(id, title, unit, color, band) {
     const el = $(id);
     const series = [{}, { label: title, stroke: color, width: 1.5, spanGaps: false, value: (u, v) => (v == null ? "-" : v.toFixed(4) + unit) }];
-    const opts = { title, width: 560, height: 170, scales: { x: { time: true } }, series, legend: { show: true } };
+    const axis = { stroke: "#94a3b8", grid: { stroke: "#1e293b", width: 1 }, ticks: { stroke: "#334155", width: 1 } };
+    const opts = { title, width: 560, height: 170, series, legend: { show: true }, axes: [axis, Object.assign({ size: 70 }, axis)],
+      scales: { x: { time: true }, y: unit ? {} : { range: [0, 1.05] } } };
     if (band) {
       series.push({ label: "-1σ", stroke: color + "55", width: 1, value: (u, v) => (v == null ? "-" : v.toFixed(4)) },
         { label: "+1σ", stroke: color + "55", width: 1, value: (u, v) => (v == null ? "-" : v.toFixed(4)) });

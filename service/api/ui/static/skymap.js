@@ -20,7 +20,7 @@ const SkyMap = (() => {
     });
     Celestial.display({
       container: containerId, width, projection: "stereographic", transform: "equatorial",
-      center: [0, 0, 0], zoomlevel: 4, zoomextend: 20, adaptable: true, interactive: false, form: false,
+      center: [0, 0, 0], zoomlevel: 4, zoomextend: 20, adaptable: true, interactive: true, // (false sets an inline style attribute, which the CSP refuses) form: false,
       controls: false, location: false, disableAnimations: true, datapath: "/ui/static/vendor/d3-celestial/data/",
       stars: { show: true, limit: 6, colors: true, names: false, proper: false, desig: false, size: 6, data: "stars.6.json" },
       dsos: { show: false, names: false }, mw: { show: false }, planets: { show: false },

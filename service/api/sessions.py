@@ -53,7 +53,8 @@ class Viewer:
 
 
 class SessionHub:
-    """Viewers by session name, and frames published per session (one per worker process)."""
+    """Viewers by session name, and frames published to each watched session (one hub per worker
+    process); ``seq`` counts a session's frames since its first current viewer came."""
 
     def __init__(self) -> None:
         self.viewers: dict[str, set[Viewer]] = {}
@@ -61,14 +62,19 @@ class SessionHub:
 
     def publish(self, name: str, request: str | None, reply: str) -> None:
         """Hand a frame (its text message, None for an image) and its reply (JSON) to every viewer of
-        ``name``; never waits and never parses (viewers format their own messages)."""
-        seq = self.published[name] = self.published.get(name, 0) + 1
-        for viewer in self.viewers.get(name, ()):
+        ``name``; never waits and never parses (viewers format their own messages). Without a viewer
+        nothing is kept: a stream may use any number of names."""
+        viewers = self.viewers.get(name)
+        if not viewers:
+            return
+        seq = self.published[name] = self.published[name] + 1
+        for viewer in viewers:
             viewer.put((seq, request, reply))
 
     def subscribe(self, name: str, maxlen: int = VIEWER_QUEUE) -> Viewer:
         viewer = Viewer(maxlen)
         self.viewers.setdefault(name, set()).add(viewer)
+        self.published.setdefault(name, 0)
         return viewer
 
     def unsubscribe(self, name: str, viewer: Viewer) -> None:
@@ -77,6 +83,7 @@ class SessionHub:
             group.discard(viewer)
             if not group:
                 del self.viewers[name]
+                del self.published[name]
 
 
 def publishing(handle: Handler, hub: SessionHub, name: str) -> Handler:

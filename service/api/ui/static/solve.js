@@ -112,7 +112,11 @@
     canvas.height = Math.round(cam.h * scale);
     ctx.fillStyle = "#000";
     ctx.fillRect(0, 0, canvas.width, canvas.height);
-    if (bitmap) ctx.drawImage(bitmap, 0, 0, canvas.width, canvas.height);
+    if (bitmap) {
+      ctx.filter = "brightness(2.5) contrast(1.4)"; // star fields are dark: a fixed stretch for display only
+      ctx.drawImage(bitmap, 0, 0, canvas.width, canvas.height);
+      ctx.filter = "none";
+    }
     ctx.save();
     ctx.scale(scale, scale);
     ctx.translate(0.5, 0.5); // pixel centres

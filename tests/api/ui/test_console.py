@@ -188,3 +188,22 @@ def test_the_live_view_follows_a_replayed_session(console: str, page: Any, tmp_p
     assert page.locator("#attitude tr").count() >= 4
     assert page.errors == []
     screenshot(page, tmp_path, "console-live.png")
+
+
+@pytest.mark.skipif(not (REAL / "matches.json").is_file(), reason=f"real data absent ({REAL})")
+def test_a_pasted_centroid_list_is_solved_with_a_configured_camera(console: str, page: Any, tmp_path: Path) -> None:
+    """The reference centroids of the real image above, as a user would paste them."""
+    matches = json.loads((REAL / "matches.json").read_text())["images"][IMAGE]["matches"]
+    page.goto(console + "/ui/solve")
+    wait_for(lambda: page.locator("#camera option[value=tetra3]").count(), what="the configured cameras")
+    page.click("summary")
+    page.fill("#centroids", json.dumps({"camera": "tetra3", "centroids": [[m["x"], m["y"]] for m in matches]}))
+    page.click("#solve-json")
+    wait_for(lambda: page.text_content("#result-json"), what="the result")
+    result = json.loads(page.text_content("#result-json"))
+    assert result["status"] == "solved" and len(result["stars"]) >= 10
+    for star in result["stars"]:
+        assert star["hip"] == matches[star["centroid"]]["hip"]
+    assert page.get_attribute("#image", "data-identified") == str(len(result["stars"]))
+    assert page.get_attribute("#image", "data-detected") == str(len(matches))
+    assert page.errors == []

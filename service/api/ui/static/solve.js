@@ -113,9 +113,8 @@
     ctx.fillStyle = "#000";
     ctx.fillRect(0, 0, canvas.width, canvas.height);
     if (bitmap) {
-      ctx.filter = "brightness(2.5) contrast(1.4)"; // star fields are dark: a fixed stretch for display only
       ctx.drawImage(bitmap, 0, 0, canvas.width, canvas.height);
-      ctx.filter = "none";
+      stretch(ctx, canvas.width, canvas.height);
     }
     ctx.save();
     ctx.scale(scale, scale);
@@ -146,6 +145,18 @@
     $("result-json").textContent = json;
     link("dl-json", new Blob([json], { type: "application/json" }));
     if (result.wcs) link("dl-wcs", new Blob([fitsHeader(result.wcs)], { type: "application/fits" }));
+  }
+
+  // Star fields are dark: the sky (99.5th percentile and below) to black, the brightest stars to white; display only.
+  function stretch(ctx, w, h) {
+    const img = ctx.getImageData(0, 0, w, h), px = img.data, hist = new Uint32Array(256);
+    for (let i = 0; i < px.length; i += 4) hist[(px[i] + px[i + 1] + px[i + 2]) / 3 | 0] += 1;
+    const level = (q) => { let n = 0; for (let v = 0; v < 256; v++) { n += hist[v]; if (n >= q * w * h) return v; } return 255; };
+    const lo = level(0.995), hi = Math.max(lo + 40, level(0.99995));
+    const lut = new Uint8ClampedArray(256);
+    for (let v = 0; v < 256; v++) lut[v] = 255 * Math.sqrt(Math.max(0, Math.min(1, (v - lo) / (hi - lo))));
+    for (let i = 0; i < px.length; i += 4) { px[i] = lut[px[i]]; px[i + 1] = lut[px[i + 1]]; px[i + 2] = lut[px[i + 2]]; }
+    ctx.putImageData(img, 0, 0);
   }
 
   function row(cells, tag) {

@@ -180,7 +180,8 @@ async def _ws_client(url: str, payloads: list[bytes], window: int, lat: list[flo
     return solved
 
 
-async def run_mode(mode: str, url: str, payloads: list[bytes], clients: int, window: int) -> tuple[float, list[float], int]:
+async def run_mode(mode: str, url: str, payloads: list[bytes], clients: int, window: int,
+                   session: str | None = None) -> tuple[float, list[float], int]:
     """Split ``payloads`` over ``clients`` connections; (seconds, latencies, solved)."""
     shares = [payloads[i::clients] for i in range(clients)]
     lat: list[float] = []
@@ -189,16 +190,17 @@ async def run_mode(mode: str, url: str, payloads: list[bytes], clients: int, win
     if mode == "rest":
         counts = await asyncio.gather(*(_rest_client(host, int(port), s, lat) for s in shares))
     else:
-        ws_url = "ws://" + url.removeprefix("http://") + "/v1/stream"
+        ws_url = "ws://" + url.removeprefix("http://") + "/v1/stream" + (f"?session={session}" if session else "")
         counts = await asyncio.gather(*(_ws_client(ws_url, s, window, lat) for s in shares))
     return time.perf_counter() - t0, lat, sum(counts)
 
 
-def measure(mode: str, server: Server, payloads: list[bytes], workers: int, clients: int, window: int) -> Row:
+def measure(mode: str, server: Server, payloads: list[bytes], workers: int, clients: int, window: int,
+            session: str | None = None) -> Row:
     url = server.url
-    asyncio.run(run_mode(mode, url, payloads[: max(50, clients * 10)], clients, window))  # warm up
+    asyncio.run(run_mode(mode, url, payloads[: max(50, clients * 10)], clients, window, session))  # warm up
     cpu0 = group_cpu_s(server.pgid)
-    seconds, lat, solved = asyncio.run(run_mode(mode, url, payloads, clients, window))
+    seconds, lat, solved = asyncio.run(run_mode(mode, url, payloads, clients, window, session))
     cpu_ms = (group_cpu_s(server.pgid) - cpu0) * 1e3 / len(payloads)
     ms = np.asarray(lat) * 1e3
     p50, p95, p99 = (float(np.percentile(ms, q)) for q in (50, 95, 99))
@@ -223,6 +225,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--window", type=int, default=8, help="WebSocket frames in flight per client")
     ap.add_argument("--modes", nargs="+", choices=["rest", "ws"], default=["rest", "ws"])
     ap.add_argument("--method", default="auto")
+    ap.add_argument("--session", default=None, help="WebSocket: publish to this stream session (no viewer: the "
+                                                    "console's cost on the stream path)")
     ap.add_argument("--db", type=Path, default=None, help="navigation database (default: the default one)")
     ap.add_argument("--seed", type=int, default=2026)
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "out" / "service.md")
@@ -235,7 +239,7 @@ def main(argv: list[str] | None = None) -> None:
         with served(workers, args.db) as server:
             for clients in args.clients:
                 for mode in args.modes:
-                    rows.append(measure(mode, server, payloads, workers, clients, args.window))
+                    rows.append(measure(mode, server, payloads, workers, clients, args.window, args.session))
                     print(table(rows[-1:]).splitlines()[-1], flush=True)
     machine = f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
     command = "python -m bench.bench_service " + " ".join(argv if argv is not None else sys.argv[1:])

@@ -100,6 +100,8 @@ def replay(
                                                   min=0)] = None,
     aem: Annotated[Path | None, typer.Option(help="Write the solved attitudes as a CCSDS AEM.")] = None,
     method: Annotated[str, typer.Option(help="Identification method, or 'auto'.")] = "auto",
+    session: Annotated[str | None, typer.Option(help="With --ws: publish the frames to this stream session's "
+                                                     "viewers (the web console's /ui/live).")] = None,
     wrong_arcsec: Annotated[float, typer.Option(
         help="Cross-boresight error above which a solved frame is wrong, arcsec.", min=0.0,
     )] = WRONG_CROSS_BORESIGHT_ARCSEC,
@@ -137,7 +139,7 @@ def replay(
         try:
             result = asyncio.run(replay_frames(
                 frames, url=url, recording=recording, ws=ws, rate_hz=rate, concurrency=concurrency,
-                api_key=api_key, timeout=timeout, retries=policy, method=method, bars=bars,
+                api_key=api_key, timeout=timeout, retries=policy, method=method, session=session, bars=bars,
                 on_result=on_result))
         except KeyboardInterrupt:
             progress.stop()

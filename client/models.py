@@ -212,6 +212,10 @@ class SolveResult(BaseModel):
         "(1-based FITS pixels), CD1_1..CD2_2 (deg/px), NAXIS1/2.",
     )
     n_detected: int | None = Field(None, description="Images only: stars detected in the image.")
+    centroids: list[list[float]] | None = Field(
+        None, description="Images only: the detected stars [x, y, flux] (px, origin the centre of the top-left "
+        "pixel); each star's `centroid` indexes this list."
+    )
 
 
 class Truth(BaseModel):

@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlencode
 
 import httpx
 import pydantic
@@ -166,13 +167,14 @@ async def _replay_rest(run: _Run, wire_ids: list[FrameId], recording: Path | Non
 
 async def _replay_ws(run: _Run, wire_ids: list[FrameId], recording: Path | None, *, url: str,
                      api_key: str | None, timeout: float | None, retries: Retry | int | None, method: str,
-                     concurrency: int) -> int:
+                     concurrency: int, session: str | None = None) -> int:
     index_of = {str(w): i for i, w in enumerate(wire_ids)}
     window = asyncio.Semaphore(concurrency)
     sent_at: dict[int, float] = {}
     # Image frames are binary messages solved with the connection's camera: the first one's.
     image_camera = next((f.camera for f in run.frames if f.image is not None), None)
-    stream = AsyncStream(ws_url(url), api_key=api_key, timeout=timeout, retries=retries, method=method,
+    query = "?" + urlencode({"session": session}) if session else ""  # publish to /ui/live viewers
+    stream = AsyncStream(ws_url(url) + query, api_key=api_key, timeout=timeout, retries=retries, method=method,
                          camera=image_camera)
     requests: dict[int, SolveRequest] = {}
     unsendable: set[int] = set()
@@ -252,13 +254,15 @@ async def replay_frames(
     timeout: float | None = DEFAULT_TIMEOUT_S,
     retries: Retry | int | None = None,
     method: str = "auto",
+    session: str | None = None,
     bars: WrongBars | None = None,
     on_result: OnResult | None = None,
     transport: httpx.AsyncBaseTransport | None = None,
 ) -> ReplayReport:
     """Replay ``frames`` against the server at ``url`` and score them; see the module docstring.
 
-    ``recording`` is the file the frames came from (image paths are relative to it);
+    ``recording`` is the file the frames came from (image paths are relative to it); ``session``
+    (WebSocket only) names the stream session whose viewers see every frame (``/ui/live``);
     ``on_result`` is called with each frame's `FrameReport` as it completes; ``transport``
     (REST only) replaces the network, e.g. ``httpx.ASGITransport(app)``.
     """
@@ -273,7 +277,8 @@ async def replay_frames(
     try:
         if ws:
             reconnects = await _replay_ws(run, wire_ids, source, url=url, api_key=api_key, timeout=timeout,
-                                          retries=retries, method=method, concurrency=concurrency)
+                                          retries=retries, method=method, concurrency=concurrency,
+                                          session=session)
         else:
             reconnects = await _replay_rest(run, wire_ids, source, url=url, api_key=api_key, timeout=timeout,
                                             retries=retries, method=method, concurrency=concurrency,

@@ -13,7 +13,7 @@ from fastapi import Depends, FastAPI
 from .. import __version__
 from ..core.navdb import ensure_default_database, open_database
 from ..core.pipeline import SolveOptions, warm_up
-from . import errors
+from . import errors, sessions, ui
 from .convert import camera_entry
 from .deps import require_api_key
 from .lifecycle import ConnectionLimit, Lifecycle
@@ -62,4 +62,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(solve.router, dependencies=keyed)
     app.include_router(stream.router)  # checks the key itself (header or ?api_key=)
     app.include_router(metrics.router, dependencies=keyed)
+    app.include_router(sessions.router)  # viewers of named stream sessions; checks the key itself
+    ui.install(app)  # the web console at /ui (static pages; the key is typed in the page)
     return app

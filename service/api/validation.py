@@ -10,6 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from ..core.errors import InvalidInputError, SkyfixError
 from . import convert
 from .errors import error_status
+from .sessions import SESSION_NAME
 
 CLOSE_POLICY = 1008
 """WebSocket close code for a connection refused over its query parameters (RFC 6455 'policy
@@ -28,6 +29,8 @@ class StreamQuery(BaseModel):
     fov_deg: float | None = Field(None, gt=0, lt=170, description="Image frames: horizontal FOV, deg.")
     method: str = Field("auto", max_length=32, description="Identification method, or 'auto'.")
     hint_radius_deg: float = Field(5.0, gt=0, le=180, description="Tracking hint radius, deg.")
+    session: str | None = Field(None, pattern=SESSION_NAME.pattern, description=(
+        "Publish every reply to the viewers of this session (WS /v1/sessions/{session}/watch)."))
 
 
 def one_camera(camera: object | None, fov_deg: float | None) -> None:

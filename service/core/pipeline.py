@@ -423,6 +423,8 @@ def solve_image(
     timings["total"] = timings.get("total", 0.0) + t_detect
     object.__setattr__(sol, "timings_ms", timings)
     object.__setattr__(sol, "n_detected", len(found))
+    rows = np.column_stack([found.centroids.xy, found.centroids.flux]).round(3)
+    object.__setattr__(sol, "detected", tuple((float(x), float(y), float(f)) for x, y, f in rows))
     if sol.solved and sol.quaternion is not None:
         object.__setattr__(sol, "wcs", tan_wcs(quat_to_matrix(np.asarray(sol.quaternion)), camera))
     return sol

@@ -125,6 +125,7 @@ class Solution:
     timings_ms: dict[str, float] = field(default_factory=dict)
     wcs: dict[str, Any] | None = None
     n_detected: int | None = None
+    detected: tuple[tuple[float, float, float], ...] | None = None
     reason: NoSolutionReason | None = None
     methods_tried: tuple[str, ...] = ()
     message: str | None = None
@@ -170,4 +171,5 @@ class Solution:
             "timings_ms": {k: float(v) for k, v in self.timings_ms.items()},
             **({"wcs": self.wcs} if self.wcs is not None else {}),
             **({"n_detected": self.n_detected} if self.n_detected is not None else {}),
+            **({"centroids": [list(c) for c in self.detected]} if self.detected is not None else {}),
         }

@@ -29,6 +29,7 @@ from .. import convert, validation
 from ..deps import API_KEY_HEADER, CamerasDep, NavDbDep, SettingsDep, SolverDep, key_ok
 from ..errors import ApiError, error_status
 from ..pump import pump
+from ..sessions import get_hub, publishing
 from ..settings import Settings
 from ..solver import Solver
 
@@ -51,7 +52,7 @@ class StreamState:
 @router.websocket("/stream")
 async def stream(ws: WebSocket, db: NavDbDep, solver: SolverDep, cameras: CamerasDep, settings: SettingsDep) -> None:
     """Query parameters (``validation.StreamQuery``): track, camera, fov_deg, method,
-    hint_radius_deg, api_key. A bad one closes the connection with code 1008 and a reason
+    hint_radius_deg, session, api_key. A bad one closes the connection with code 1008 and a reason
     naming it; a wrong key is refused at the handshake (403)."""
     if not key_ok(settings, ws.headers.get(API_KEY_HEADER) or ws.query_params.get("api_key")):
         await ws.close(code=1008, reason="missing or wrong API key")
@@ -65,7 +66,8 @@ async def stream(ws: WebSocket, db: NavDbDep, solver: SolverDep, cameras: Camera
     await ws.accept()
     frames = _Frames(db, solver, cameras, settings,
                      StreamState(q.camera, q.fov_deg, q.method, q.track, q.hint_radius_deg))
-    await pump(ws, frames.handle, max_in_flight=settings.max_in_flight,
+    handle = frames.handle if q.session is None else publishing(frames.handle, get_hub(ws), q.session)
+    await pump(ws, handle, max_in_flight=settings.max_in_flight,
                lifecycle=getattr(ws.app.state, "lifecycle", None))
 
 

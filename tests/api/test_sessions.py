@@ -6,7 +6,7 @@ import asyncio
 import json
 
 import pytest
-from websockets.exceptions import InvalidStatus
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from service.api.sessions import SessionHub, Viewer, viewer_message
@@ -69,5 +69,8 @@ def test_a_viewer_sees_every_frame_of_its_session_with_the_reply(server: LiveSer
 def test_a_bad_session_name_is_refused(server: LiveServer, name: str) -> None:
     from urllib.parse import quote
 
-    with pytest.raises(InvalidStatus), connect(server.ws_url + "?session=" + quote(name)):
-        pass
+    # like every bad query parameter: accepted, then closed with 1008 and a reason naming it
+    with connect(server.ws_url + "?session=" + quote(name)) as ws, pytest.raises(ConnectionClosed) as closed:
+        ws.recv(timeout=10)
+    assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008
+    assert "session" in closed.value.rcvd.reason

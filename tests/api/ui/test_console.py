@@ -207,3 +207,46 @@ def test_a_pasted_centroid_list_is_solved_with_a_configured_camera(console: str,
     assert page.get_attribute("#image", "data-identified") == str(len(result["stars"]))
     assert page.get_attribute("#image", "data-detected") == str(len(matches))
     assert page.errors == []
+
+
+@pytest.fixture(scope="module")
+def keyed(api_db_path: Path) -> Iterator[str]:
+    """A server that needs an API key (the small API database, in a thread)."""
+    from service.api import Settings
+
+    from ..conftest import CAMERA_SPEC, start_server
+
+    live = start_server(Settings(db_path=api_db_path, api_key="console-test-key", cameras={"tetra3": CAMERA_SPEC}))
+    yield live.url
+    live.stop()
+
+
+def test_the_key_is_typed_kept_in_memory_and_sent(keyed: str, page: Any, browser: Any, tmp_path: Path) -> None:
+    rows = [[512.0 + 40 * i, 384.0 - 25 * i] for i in range(4)]
+    html = page.goto(keyed + "/ui/solve").text()
+    assert "console-test-key" not in html
+    page.click("summary")
+    page.fill("#centroids", json.dumps({"camera": {"width": 1024, "height": 768, "fov_deg": 11.4}, "centroids": rows}))
+    page.click("#solve-json")
+    error = wait_for(lambda: page.is_visible("#error") and page.text_content("#error"), what="the 401")
+    assert error == "401 X-API-Key: missing or wrong API key"
+    page.fill("#apikey", "console-test-key")
+    page.dispatch_event("#apikey", "change")
+    wait_for(lambda: page.locator("#camera option[value=tetra3]").count(), what="the cameras, with the key")
+    page.click("#solve-json")
+    wait_for(lambda: page.text_content("#result-json"), what="an answer with the key")
+    assert json.loads(page.text_content("#result-json"))["status"] in ("solved", "no_solution")
+    assert page.is_hidden("#error")
+    state = page.context.storage_state()
+    assert "console-test-key" not in json.dumps(state)  # no cookie, no localStorage
+    live = page.context.new_page()
+    live.goto(keyed + "/ui/live?session=keyed")
+    live.click("#connect")
+    wait_for(lambda: "refused" in live.text_content("#status"), what="the refusal without a key")
+    live.fill("#apikey", "console-test-key")
+    live.click("#connect")
+    wait_for(lambda: live.text_content("#status") == "watching keyed", what="the viewer, with the key")
+    live.reload()
+    assert live.input_value("#apikey") == ""  # gone with the page
+    assert page.errors == []
+    screenshot(page, tmp_path, "console-key.png")

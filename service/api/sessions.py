@@ -1,8 +1,8 @@
 """Named stream sessions: ``WS /v1/stream?session=NAME`` publishes each reply; viewers watch it.
 
-A viewer (``WS /v1/sessions/{name}/watch``) gets every published frame and its reply through its own bounded queue
-that drops the oldest entry when the viewer falls behind, so a slow or stalled viewer never slows
-the stream that publishes. With no viewer, publishing is one dict lookup.
+A viewer (``WS /v1/sessions/{name}/watch``) gets every published frame and its reply through its
+own bounded queue that drops the oldest entry when the viewer falls behind, so a slow or stalled
+viewer never slows the stream that publishes. With no viewer, publishing is one dict lookup.
 """
 
 from __future__ import annotations
@@ -112,7 +112,8 @@ router = APIRouter(prefix="/v1", tags=["stream"])
 @router.websocket("/sessions/{name}/watch")
 async def watch(
     ws: WebSocket, settings: SettingsDep,
-    name: Annotated[str, Path(pattern=SESSION_NAME.pattern, description="Session name, as in /v1/stream?session=.")],
+    name: Annotated[str, Path(pattern=SESSION_NAME.pattern,
+                              description="Session name, as in /v1/stream?session=.")],
     api_key: Annotated[str | None, Query(description="For clients that cannot send X-API-Key.")] = None,
 ) -> None:
     """Every frame of stream session ``name`` from now on, one text message each (drop-oldest when slow).

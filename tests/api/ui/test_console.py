@@ -87,6 +87,26 @@ def wait_for(check: Callable[[], Any], timeout_s: float = 30, what: str = "condi
     raise AssertionError(f"timed out waiting for {what}")
 
 
+def slew_recording(path: Path, n: int) -> Path:
+    """A rig slewing through Orion, 0.4 deg a frame (the tetra3 camera, 0.2 px noise, one false star)."""
+    import numpy as np
+
+    from service.core.attitude import matrix_from_radec_roll, matrix_to_quat
+    from service.core.camera import Camera
+    from service.core.sim import SimConfig, simulate_frame
+
+    cam = Camera.from_fov(11.4, 1024, 768)
+    config = SimConfig(mag_limit=6.0, centroid_noise_px=0.2, false_stars=1, max_stars=30)
+    rng = np.random.default_rng(7)
+    with path.open("w") as fh:
+        for i in range(n):
+            r = matrix_from_radec_roll(70.0 + 0.4 * i, 2.0 - 0.1 * i, 30.0 + 0.2 * i)
+            frame = simulate_frame(cam, matrix_to_quat(r), config, rng)
+            fh.write(json.dumps(frame.to_record(i, cam, camera_spec={"width": 1024, "height": 768,
+                                                                       "fov_deg": 11.4})) + "\n")
+    return path
+
+
 def number(text: str) -> float:
     return float(re.search(r"-?\d+(\.\d+)?", text).group())  # type: ignore[union-attr]
 
@@ -150,11 +170,8 @@ def test_a_bad_file_and_a_bad_field_show_the_service_message(console: str, page:
 
 
 def test_the_live_view_follows_a_replayed_session(console: str, page: Any, tmp_path: Path) -> None:
-    recording = tmp_path / "rig.jsonl"
+    recording = slew_recording(tmp_path / "rig.jsonl", 60)
     cli = [sys.executable, "-c", "from service.cli import main; main()"]
-    subprocess.run([*cli, "sim", "--out", str(recording), "--n", "60", "--width", "1024", "--height", "768",
-                    "--fov", "11.4", "--noise", "0.2", "--false-stars", "1", "--max-stars", "30", "--seed", "7"],
-                   check=True, cwd=ROOT, capture_output=True)
     page.goto(console + "/ui/live?session=test-rig&watch=1")
     wait_for(lambda: page.text_content("#status") == "watching test-rig", what="the viewer to connect")
     replay = subprocess.Popen([*cli, "replay", str(recording), "--ws", "--session", "test-rig", "--rate", "12",
@@ -207,3 +224,46 @@ def test_a_pasted_centroid_list_is_solved_with_a_configured_camera(console: str,
     assert page.get_attribute("#image", "data-identified") == str(len(result["stars"]))
     assert page.get_attribute("#image", "data-detected") == str(len(matches))
     assert page.errors == []
+
+
+@pytest.fixture(scope="module")
+def keyed(api_db_path: Path) -> Iterator[str]:
+    """A server that needs an API key (the small API database, in a thread)."""
+    from service.api import Settings
+
+    from ..conftest import CAMERA_SPEC, start_server
+
+    live = start_server(Settings(db_path=api_db_path, api_key="console-test-key", cameras={"tetra3": CAMERA_SPEC}))
+    yield live.url
+    live.stop()
+
+
+def test_the_key_is_typed_kept_in_memory_and_sent(keyed: str, page: Any, browser: Any, tmp_path: Path) -> None:
+    rows = [[512.0 + 40 * i, 384.0 - 25 * i] for i in range(4)]
+    html = page.goto(keyed + "/ui/solve").text()
+    assert "console-test-key" not in html
+    page.click("summary")
+    page.fill("#centroids", json.dumps({"camera": {"width": 1024, "height": 768, "fov_deg": 11.4}, "centroids": rows}))
+    page.click("#solve-json")
+    error = wait_for(lambda: page.is_visible("#error") and page.text_content("#error"), what="the 401")
+    assert error == "401 X-API-Key: missing or wrong API key"
+    page.fill("#apikey", "console-test-key")
+    page.dispatch_event("#apikey", "change")
+    wait_for(lambda: page.locator("#camera option[value=tetra3]").count(), what="the cameras, with the key")
+    page.click("#solve-json")
+    wait_for(lambda: page.text_content("#result-json"), what="an answer with the key")
+    assert json.loads(page.text_content("#result-json"))["status"] in ("solved", "no_solution")
+    assert page.is_hidden("#error")
+    state = page.context.storage_state()
+    assert "console-test-key" not in json.dumps(state)  # no cookie, no localStorage
+    live = page.context.new_page()
+    live.goto(keyed + "/ui/live?session=keyed")
+    live.click("#connect")
+    wait_for(lambda: "refused" in live.text_content("#status"), what="the refusal without a key")
+    live.fill("#apikey", "console-test-key")
+    live.click("#connect")
+    wait_for(lambda: live.text_content("#status") == "watching keyed", what="the viewer, with the key")
+    live.reload()
+    assert live.input_value("#apikey") == ""  # gone with the page
+    assert page.errors == []
+    screenshot(page, tmp_path, "console-key.png")

@@ -48,11 +48,13 @@
     ws = new WebSocket(Sky.wsUrl(`/v1/sessions/${encodeURIComponent(name)}/watch`));
     setStatus("connecting…", false);
     $("connect").textContent = "Stop";
-    ws.onopen = () => setStatus(`watching ${name}`, true);
-    ws.onclose = (ev) => {
+    let opened = false;
+    ws.onopen = () => { opened = true; setStatus(`watching ${name}`, true); };
+    ws.onclose = () => {
       ws = null;
       $("connect").textContent = "Watch";
-      setStatus(ev.code === 1008 ? `refused: ${ev.reason || "policy"} (check the API key / session name)` : "disconnected", false);
+      // a refused handshake (wrong key, bad name) reaches the page as a bare close before open
+      setStatus(opened ? "disconnected" : "refused or unreachable: check the API key and the session name", false);
     };
     ws.onmessage = (ev) => onMessage(JSON.parse(ev.data));
   }

@@ -177,9 +177,7 @@ def reprocess(
     """
     from distributed import Client, LocalCluster, as_completed
 
-    from service.core.navdb import ensure_default_database
-
-    from .work import DatabasePlugin, database_checksum, solve_partition
+    from .work import DatabasePlugin, _default_database_locked, database_checksum, solve_partition
 
     t0 = time.perf_counter()
     out = Path(out).resolve()
@@ -187,7 +185,7 @@ def reprocess(
     for stale in out.glob(".part-*.tmp"):  # left by a worker killed mid-write
         stale.unlink(missing_ok=True)
     parts = plan_partitions(inputs, partition_frames)
-    db_path = Path(db).resolve() if db is not None else ensure_default_database()
+    db_path = Path(db).resolve() if db is not None else _default_database_locked()
     checksum = database_checksum(db_path)
     settings: dict[str, Any] = {
         "format": "skyfix-reprocess", "inputs": [str(Path(p).resolve()) for p in inputs],

@@ -132,6 +132,21 @@ def done_partitions(out: Path, parts: Sequence[Partition]) -> dict[int, dict[str
     return done
 
 
+def _check_method(db_path: Path, method: str) -> None:
+    """Refuse on the client a method the database lacks (UnknownMethodError, naming those it
+    has), before a campaign of error records is written."""
+    from service.core.errors import UnknownMethodError
+    from service.core.methods import get_method
+    from service.core.navdb import open_database
+
+    if method == "auto":
+        return
+    get_method(method)
+    has = open_database(db_path).methods
+    if method not in has:
+        raise UnknownMethodError(method, ["auto", *has])
+
+
 def _task_key(part: Partition, out: Path, settings: dict[str, Any]) -> str:
     """A Dask key unique to this partition of this campaign (two campaigns on one client,
     e.g. in a notebook, never share a task)."""
@@ -171,6 +186,8 @@ def reprocess(
     ------
     ValueError
         ``out`` holds a campaign of other settings or another database.
+    UnknownMethodError
+        ``method`` is not one the database has.
     RuntimeError
         A partition failed on every try (e.g. a worker cannot open the database: the message
         names the worker and the path).
@@ -187,6 +204,7 @@ def reprocess(
     parts = plan_partitions(inputs, partition_frames)
     db_path = Path(db).resolve() if db is not None else _default_database_locked()
     checksum = database_checksum(db_path)
+    _check_method(db_path, method)
     settings: dict[str, Any] = {
         "format": "skyfix-reprocess", "inputs": [str(Path(p).resolve()) for p in inputs],
         "database": {"path": str(db_path) if db is not None else "default", "checksum": checksum},

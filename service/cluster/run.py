@@ -36,7 +36,10 @@ COUNTS = ("frames", "solved", "no_solution", "errors", "wrong", "checked")
 @dataclass
 class ReprocessSummary:
     """What a campaign did: partitions run and skipped, frame counts (the whole campaign's,
-    skipped partitions included), solve-time percentiles (ms, the frames solved in this run)."""
+    skipped partitions included), solve-time percentiles (ms, the frames solved in this run),
+    ``run_s`` from the plugin's registration (the workers open the database) to the last result
+    (cluster start excluded), ``wall_s``
+    the whole call."""
 
     partitions: int = 0
     skipped: int = 0
@@ -47,17 +50,19 @@ class ReprocessSummary:
     wrong: int = 0
     checked: int = 0
     wall_s: float = 0.0
+    run_s: float = 0.0
     run_frames: int = 0
     ms_percentiles: dict[str, float] = field(default_factory=dict)
 
     def line(self) -> str:
         pct = self.ms_percentiles
-        rate = self.run_frames / self.wall_s if self.wall_s > 0 else 0.0
+        times = (f"solve ms p50 {pct['p50']:.2f} p95 {pct['p95']:.2f} p99 {pct['p99']:.2f}" if pct
+                 else "no frame solved in this run")
+        rate = (f"{self.run_frames / self.run_s:,.0f} frames/s on the workers, " if self.run_s > 0 else "")
         return (f"{self.solved}/{self.frames} identified ({100 * self.solved / max(self.frames, 1):.1f}%), "
                 f"{self.no_solution} no_solution, {self.errors} error records, {self.wrong} wrong of {self.checked} "
-                f"with truth; solve ms p50 {pct.get('p50', 0):.2f} p95 {pct.get('p95', 0):.2f} p99 "
-                f"{pct.get('p99', 0):.2f}; {self.partitions} partitions run, {self.skipped} already done; "
-                f"{rate:.0f} frames/s")
+                f"with truth; {times}; {self.partitions} partitions run, {self.skipped} already done; "
+                f"{rate}{self.wall_s:.1f} s in all")
 
 
 def _write_json(path: Path, data: Any) -> None:
@@ -264,6 +269,7 @@ def reprocess(
                         last_manifest = time.monotonic()
                     if progress is not None:
                         progress(frames_done, total, summary.run_frames, time.perf_counter() - t_run)
+            summary.run_s = time.perf_counter() - t_run
             _write_json(out / MANIFEST, manifest)
             (out / JOURNAL).unlink(missing_ok=True)
         finally:

@@ -38,8 +38,7 @@ class ReprocessSummary:
     """What a campaign did: partitions run and skipped, frame counts (the whole campaign's,
     skipped partitions included), solve-time percentiles (ms, the frames solved in this run),
     ``run_s`` from the plugin's registration (the workers open the database) to the last result
-    (cluster start excluded), ``wall_s``
-    the whole call."""
+    (cluster start excluded), ``wall_s`` the whole call."""
 
     partitions: int = 0
     skipped: int = 0

@@ -37,7 +37,9 @@ COUNTS = ("frames", "solved", "no_solution", "errors", "wrong", "checked")
 @dataclass
 class ReprocessSummary:
     """What a campaign did: partitions run and skipped, frame counts (the whole campaign's,
-    skipped partitions included), solve-time percentiles (ms, the frames solved in this run)."""
+    skipped partitions included), solve-time percentiles (ms, the frames solved in this run),
+    ``run_s`` from the plugin's registration (the workers open the database) to the last result
+    (cluster start excluded), ``wall_s`` the whole call."""
 
     partitions: int = 0
     skipped: int = 0
@@ -48,17 +50,19 @@ class ReprocessSummary:
     wrong: int = 0
     checked: int = 0
     wall_s: float = 0.0
+    run_s: float = 0.0
     run_frames: int = 0
     ms_percentiles: dict[str, float] = field(default_factory=dict)
 
     def line(self) -> str:
         pct = self.ms_percentiles
-        rate = self.run_frames / self.wall_s if self.wall_s > 0 else 0.0
+        times = (f"solve ms p50 {pct['p50']:.2f} p95 {pct['p95']:.2f} p99 {pct['p99']:.2f}" if pct
+                 else "no frame solved in this run")
+        rate = (f"{self.run_frames / self.run_s:,.0f} frames/s on the workers, " if self.run_s > 0 else "")
         return (f"{self.solved}/{self.frames} identified ({100 * self.solved / max(self.frames, 1):.1f}%), "
                 f"{self.no_solution} no_solution, {self.errors} error records, {self.wrong} wrong of {self.checked} "
-                f"with truth; solve ms p50 {pct.get('p50', 0):.2f} p95 {pct.get('p95', 0):.2f} p99 "
-                f"{pct.get('p99', 0):.2f}; {self.partitions} partitions run, {self.skipped} already done; "
-                f"{rate:.0f} frames/s")
+                f"with truth; {times}; {self.partitions} partitions run, {self.skipped} already done; "
+                f"{rate}{self.wall_s:.1f} s in all")
 
 
 def _write_json(path: Path, data: Any) -> None:
@@ -133,6 +137,21 @@ def done_partitions(out: Path, parts: Sequence[Partition]) -> dict[int, dict[str
     return done
 
 
+def _check_method(db_path: Path, method: str) -> None:
+    """Refuse on the client a method the database lacks (UnknownMethodError, naming those it
+    has), before a campaign of error records is written."""
+    from service.core.errors import UnknownMethodError
+    from service.core.methods import get_method
+    from service.core.navdb import open_database
+
+    if method == "auto":
+        return
+    get_method(method)
+    has = open_database(db_path).methods
+    if method not in has:
+        raise UnknownMethodError(method, ["auto", *has])
+
+
 def _task_key(part: Partition, out: Path, settings: dict[str, Any]) -> str:
     """A Dask key unique to this partition of this campaign (two campaigns on one client,
     e.g. in a notebook, never share a task)."""
@@ -172,15 +191,15 @@ def reprocess(
     ------
     ValueError
         ``out`` holds a campaign of other settings or another database.
+    UnknownMethodError
+        ``method`` is not one the database has.
     RuntimeError
         A partition failed on every try (e.g. a worker cannot open the database: the message
         names the worker and the path).
     """
     from distributed import Client, LocalCluster, as_completed
 
-    from service.core.navdb import ensure_default_database
-
-    from .work import DatabasePlugin, database_checksum, solve_partition
+    from .work import DatabasePlugin, _default_database_locked, database_checksum, solve_partition
 
     t0 = time.perf_counter()
     out = Path(out).resolve()
@@ -188,8 +207,9 @@ def reprocess(
     for stale in out.glob(".part-*.tmp"):  # left by a worker killed mid-write
         stale.unlink(missing_ok=True)
     parts = plan_partitions(inputs, partition_frames)
-    db_path = Path(db).resolve() if db is not None else ensure_default_database()
+    db_path = Path(db).resolve() if db is not None else _default_database_locked()
     checksum = database_checksum(db_path)
+    _check_method(db_path, method)
     settings: dict[str, Any] = {
         "format": "skyfix-reprocess", "inputs": [str(Path(p).resolve()) for p in inputs],
         "database": {"path": str(db_path) if db is not None else "default", "checksum": checksum},
@@ -251,6 +271,7 @@ def reprocess(
                         last_manifest = time.monotonic()
                     if progress is not None:
                         progress(frames_done, total, summary.run_frames, time.perf_counter() - t_run)
+            summary.run_s = time.perf_counter() - t_run
             _write_json(out / MANIFEST, manifest)
             (out / JOURNAL).unlink(missing_ok=True)
         finally:

@@ -41,13 +41,13 @@ class DatabasePlugin(WorkerPlugin):
         self.path, self.checksum = path, checksum
 
     def setup(self, worker: Any) -> None:
-        from service.core.navdb import ensure_default_database, open_database
+        from service.core.navdb import open_database
         from service.core.pipeline import warm_up
 
         where = self.path or "the default database"
         worker.skyfix_db = None  # a plugin registered again must not leave the previous database
         try:
-            path = Path(self.path) if self.path else ensure_default_database()
+            path = Path(self.path) if self.path else _default_database_locked()
             where = str(path)
             db = open_database(path)
             got = database_checksum(path)
@@ -58,6 +58,24 @@ class DatabasePlugin(WorkerPlugin):
             worker.skyfix_db_error = f"worker {worker.address}: cannot use the navigation database at {where}: {exc}"
             return
         worker.skyfix_db = db
+
+
+def _default_database_locked() -> Path:
+    """The default database, built under an exclusive lock beside it: the workers of one
+    machine (or of a shared ``SKYFIX_DB_DIR``) build it once, one after the other, instead of
+    at once over each other's staging directories."""
+    import fcntl
+
+    from service.core.navdb import default_database_dir, ensure_default_database
+
+    where = default_database_dir()
+    where.mkdir(parents=True, exist_ok=True)
+    with open(where / ".skyfix-build.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            return ensure_default_database()
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def _worker_db() -> Any:

@@ -18,6 +18,7 @@ distributed = pytest.importorskip("distributed")
 from service.cluster import plan_partitions, reprocess  # noqa: E402
 from service.cluster.run import _recorded  # noqa: E402
 from service.cluster.work import DatabasePlugin, solve_partition  # noqa: E402
+from service.core.errors import UnknownMethodError  # noqa: E402
 from service.core.sim import SimConfig, simulate_frames  # noqa: E402
 from tests.conftest import SEED000_CAMERA  # noqa: E402
 
@@ -68,6 +69,9 @@ def test_output_equals_skyfix_solve_frame_for_frame(tmp_path: Path, recording: P
     assert [(p["first_id"], p["last_id"], p["start"]) for p in manifest["partitions"]][:2] == \
         [(0, 49, 0), (50, 99, manifest["partitions"][0]["end"])]
     assert not (tmp_path / "out" / "journal.jsonl").exists()  # folded into the manifest
+    with pytest.raises(UnknownMethodError, match="dmv"):  # refused before any partition is written
+        reprocess([recording], tmp_path / "dmv", db=seed000_db.path, method="dmv", client=client)
+    assert not list((tmp_path / "dmv").glob("part-*"))
     with pytest.raises(ValueError, match=r"other settings \(method 'auto' there, 'maxangle' now"):
         reprocess([recording], tmp_path / "out", db=seed000_db.path, method="maxangle", partition_frames=50,
                   client=client)

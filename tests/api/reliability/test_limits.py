@@ -82,7 +82,15 @@ def dribble(url: str, data: bytes, interval_s: float, limit_s: float,
     with socket.create_connection((host, int(port))) as s:
         if first:
             s.sendall(first)
-            assert s.recv(4096).startswith(b"HTTP/1.1 200 ")
+            head = b""  # the whole first answer: head and body may come in separate segments
+            while b"\r\n\r\n" not in head:
+                head += s.recv(4096)
+            assert head.startswith(b"HTTP/1.1 200 "), head
+            head, body = head.split(b"\r\n\r\n", 1)
+            length = int(next(line.split(b":", 1)[1] for line in head.split(b"\r\n")
+                              if line.lower().startswith(b"content-length:")))
+            while len(body) < length:
+                body += s.recv(4096)
         t0 = time.monotonic()
         sent = 0
         while time.monotonic() - t0 < limit_s:

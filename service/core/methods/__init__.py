@@ -14,6 +14,7 @@ from .maxangle import MaxAngle
 from .multifov import MultiFov
 from .pso import Pso
 from .pyramid import Pyramid
+from .quad import Quad
 from .radial import Radial
 from .triangle import Triangle
 
@@ -27,6 +28,7 @@ _REGISTRY: dict[str, Method] = {
         Dmv(),
         Pso(),
         MultiFov(),
+        Quad(),
     )
 }
 

@@ -10,8 +10,7 @@ compiled call (:mod:`.quad_kernel`) that applies the shared verifier's steps and
 bound; Python only converts the input and wraps the answer.
 
 A frame of fewer than 5 stars, or a rig of several cameras, is left to the other methods.
-After a miss, ``QuadMatcher.last_exhausted`` (on the verifier: ``quad_exhausted``) says
-whether every pattern of the brightest ``QUERY_STARS`` stars was looked up (then a frame
+After a miss, the verifier's ``exhausted`` says whether every pattern of the brightest ``QUERY_STARS`` stars was looked up (then a frame
 holding that many stars has no catalogue pattern among its brightest: see the pipeline's
 fast refusal).
 """
@@ -80,7 +79,7 @@ class QuadMatcher:
 
     def identify(self, ctx: SolveContext) -> Verified | None:
         v = ctx.verifier
-        v.quad_exhausted = False
+        v.exhausted = False
         obs = ctx.obs
         if len(obs.cameras) != 1 or len(obs) < 5:
             return None
@@ -88,7 +87,7 @@ class QuadMatcher:
         status, hyp_obs, hyp_cat, m_obs, m_cat, r, prob, trials, n_pat, exhausted = res[:10]
         v.trials = int(trials)
         v.patterns += int(n_pat)
-        v.quad_exhausted = bool(exhausted)
+        v.exhausted = bool(exhausted)
         if status == STATUS_FOUND:
             return Verified(m_obs, m_cat, r, float(prob), int(trials))
         marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials = res[10:16]

@@ -23,11 +23,12 @@ from typing import Any
 import numpy as np
 
 from ..catalog import StarTable
+from ..errors import DatabaseCorruptError
 from ..navdb.reader import NavDatabase
 from ..skygrid import build_sky_grid
 from ..verify import NEAR_MARGIN_DEG, Verified, Verifier, sky_grid
 from .base import Progress, SolveContext
-from .quad_build import build_quad_table
+from .quad_build import LAYOUT, build_quad_table
 from .quad_kernel import STATUS_FOUND, quad_search
 
 QUERY_STARS = 10
@@ -65,6 +66,9 @@ class QuadMatcher:
     def __init__(self, db: NavDatabase) -> None:
         t = db.tables["quad"]
         p = db.method_params("quad")
+        if p.get("layout") != LAYOUT:
+            raise DatabaseCorruptError(f"{db.path}: quad table of layout {p.get('layout')!r}, this skyfix reads "
+                                       f"{LAYOUT!r}; rebuild it with `skyfix db build`")
         self.db = db
         self.patterns = np.asarray(t["patterns"])
         self.table = np.asarray(t["table"])

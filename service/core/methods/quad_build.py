@@ -33,16 +33,19 @@ LATTICE_DIV = 4.0
 """Lattice spacing = field diameter / this."""
 SCALE_STEP = 1.3
 """Largest ratio between consecutive field diameters of the ladder."""
-RATIO_BIN = 0.04
+RATIO_BIN = 0.05
 """Width of an edge-ratio bin."""
 EDGE_BINS_PER_FOV = 48
 """The largest edge is binned ``fov_max / this`` wide."""
 MAX_LOAD = 0.6
 """Most patterns per slot of the hash table."""
 N_RATIO_BINS = int(math.ceil(1.0 / RATIO_BIN)) + 1
-FINE_STEPS = 8
+FINE_BITS = 4
+FINE_STEPS = 1 << FINE_BITS
 """Steps of a value's position inside its bin, kept in the table."""
-FINGER_BITS = 14
+FINGER_BITS = 32 - 6 * FINE_BITS
+LAYOUT = f"ratio{N_RATIO_BINS}-fine{FINE_BITS}-finger{FINGER_BITS}"
+"""The table's word layout and key radix; a table of another layout cannot be read."""
 KEY_MULT = np.uint64(0x9E3779B97F4A7C15)
 
 
@@ -72,7 +75,7 @@ def build_quad_table(vec: np.ndarray, rank: np.ndarray, fov_min_deg: float, fov_
     """
     per_field = int(params.get("stars_per_field", STARS_PER_FIELD))
     div = float(params.get("lattice_div", LATTICE_DIV))
-    ratio_bin = float(params.get("ratio_bin", RATIO_BIN))
+    ratio_bin = RATIO_BIN  # the key's radix (N_RATIO_BINS) is fixed by the layout
     edge_bin = math.radians(fov_max_deg) / float(params.get("edge_bins_per_fov", EDGE_BINS_PER_FOV))
     vec = np.ascontiguousarray(vec, dtype=np.float64)
     rank = np.ascontiguousarray(rank, dtype=np.int64)
@@ -92,7 +95,7 @@ def build_quad_table(vec: np.ndarray, rank: np.ndarray, fov_min_deg: float, fov_
     cap = 1 << max(4, int(math.ceil(math.log2(max(len(patterns), 1) / MAX_LOAD))))
     table = _build_table(vec, patterns, ratio_bin, edge_bin, cap)
     store = patterns.astype(np.uint16 if n < 65536 else np.int32)
-    used = {"stars_per_field": per_field, "lattice_div": div, "ratio_bin": ratio_bin,
+    used = {"layout": LAYOUT, "stars_per_field": per_field, "lattice_div": div, "ratio_bin": ratio_bin,
             "edge_bin_rad": edge_bin, "scales_deg": [round(float(s), 4) for s in scales],
             "fov_max_deg": float(fov_max_deg), "n_patterns": int(len(patterns))}
     return {"patterns": store, "table": table}, used
@@ -218,10 +221,10 @@ def pattern_bins(e: np.ndarray, ratio_bin: float, edge_bin: float, q: np.ndarray
 @njit(cache=True, nogil=True, inline="always")
 def slot_word(pattern: int, h: np.uint64, fine: np.ndarray) -> np.int64:
     """A table slot: ``pattern + 1`` (high 32 bits), ``FINGER_BITS`` of the key's hash, and the
-    six fine positions (3 bits each)."""
+    six fine positions (``FINE_BITS`` each)."""
     sig = np.int64(h >> np.uint64(64 - FINGER_BITS))
     for i in range(6):
-        sig = (sig << 3) | fine[i]
+        sig = (sig << FINE_BITS) | fine[i]
     return (np.int64(pattern + 1) << 32) | sig
 
 

@@ -31,7 +31,7 @@ from ..match import _match_rig, _refine, _wahba_pairs
 from ..skygrid import collect_within, has_star_within
 from ..attitude import wahba_kernel
 from ..verify import SETTLE_FACTORS
-from .quad_build import FINE_STEPS, FINGER_BITS, N_RATIO_BINS, combine_key, key_hash, sorted_edges
+from .quad_build import FINE_BITS, FINE_STEPS, FINGER_BITS, N_RATIO_BINS, combine_key, key_hash, sorted_edges
 
 PERMS = np.array([[a, b, c, d] for a in range(4) for b in range(4) for c in range(4) for d in range(4)
                   if len({a, b, c, d}) == 4], dtype=np.int64)
@@ -131,6 +131,8 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
     x = np.empty(6)
     t = np.empty(6)
     f_lo = np.empty(6, np.int64)
+    lo_fine = np.empty(6, np.int64)
+    hi_fine = np.empty(6, np.int64)
     f_hi = np.empty(6, np.int64)
     lo = np.empty(6, np.int64)
     hi = np.empty(6, np.int64)
@@ -183,21 +185,24 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
                     probes += total
                     for i in range(6):
                         cur[i] = lo[i]
+                    for i in range(6):  # where the query's range lies inside its first and last bin
+                        lo_fine[i] = max(int((x[i] - t[i] - lo[i]) * FINE_STEPS), 0)
+                        hi_fine[i] = min(int((x[i] + t[i] - hi[i]) * FINE_STEPS), FINE_STEPS - 1)
                     for _ in range(total):
-                        for i in range(6):  # where the query's range lies inside each bin
-                            f_lo[i] = max(int((x[i] - t[i] - cur[i]) * FINE_STEPS), 0)
-                            f_hi[i] = min(int((x[i] + t[i] - cur[i]) * FINE_STEPS), FINE_STEPS - 1)
+                        for i in range(6):
+                            f_lo[i] = lo_fine[i] if cur[i] == lo[i] else 0
+                            f_hi[i] = hi_fine[i] if cur[i] == hi[i] else FINE_STEPS - 1
                         h = key_hash(combine_key(cur))
                         finger = np.int64(h >> np.uint64(64 - FINGER_BITS))
                         sl = h & mask
                         while table[sl] != 0:
                             word = table[sl]
                             sl = (sl + np.uint64(1)) & mask
-                            if (word >> 18) & FINGER_MASK != finger:
+                            if (word >> (6 * FINE_BITS)) & FINGER_MASK != finger:
                                 continue
                             inside = True
                             for i in range(6):
-                                fi = (word >> (3 * (5 - i))) & 7
+                                fi = (word >> (FINE_BITS * (5 - i))) & (FINE_STEPS - 1)
                                 if fi < f_lo[i] or fi > f_hi[i]:
                                     inside = False
                                     break

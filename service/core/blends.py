@@ -11,7 +11,10 @@ fainter and no other observed star competes for it.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from .types import FloatArray, IntArray
 
@@ -37,26 +40,53 @@ def dominant_pairs(obs_xy: FloatArray, free_obs: IntArray, pred_xy: FloatArray, 
     radius_px, crowd : float
         The verifier's match radius and crowding factor.
     """
-    out_o: list[int] = []
-    out_p: list[int] = []
+    free = np.ascontiguousarray(free_pred, dtype=np.bool_)
+    o, p, n = dominant_kernel(np.ascontiguousarray(obs_xy, dtype=np.float64), np.ascontiguousarray(free_obs, np.int64),
+                              np.ascontiguousarray(pred_xy, dtype=np.float64).reshape(-1, 2),
+                              np.ascontiguousarray(pred_mag, dtype=np.float64), free, float(radius_px), float(crowd),
+                              float(min_delta_mag))
+    free_pred[...] = free
+    return o[:n].copy(), p[:n].copy()
+
+
+@njit(cache=True, nogil=True)
+def dominant_kernel(obs_xy: np.ndarray, free_obs: np.ndarray, pred_xy: np.ndarray, pred_mag: np.ndarray,
+                    free_pred: np.ndarray, radius_px: float, crowd: float,
+                    min_delta_mag: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """Compiled body of :func:`dominant_pairs`: ``(obs rows, pred rows, count)``; clears the
+    ``free_pred`` entries it pairs."""
+    out_o = np.empty(len(free_obs), np.int64)
+    out_p = np.empty(len(free_obs), np.int64)
+    n_out = 0
     if len(free_obs) == 0 or len(pred_xy) == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return out_o, out_p, 0
     wide = crowd * radius_px
-    # distances of every free observed star to every predicted one, at once
-    d = np.hypot(obs_xy[free_obs, 0][:, None] - pred_xy[None, :, 0], obs_xy[free_obs, 1][:, None] - pred_xy[None, :, 1])
-    for k in np.flatnonzero((d <= radius_px).any(axis=1)):
-        i = int(free_obs[k])
-        near = np.flatnonzero(d[k] <= wide)
-        within = near[d[k, near] <= radius_px]
-        best = within[np.argmin(pred_mag[within])]
-        others = near[near != best]
-        if not free_pred[best] or (len(others) and pred_mag[others].min() - pred_mag[best] < min_delta_mag):
+    d = np.empty(len(pred_xy))
+    for k in range(len(free_obs)):
+        i = free_obs[k]
+        best = -1
+        for j in range(len(pred_xy)):
+            d[j] = math.hypot(obs_xy[i, 0] - pred_xy[j, 0], obs_xy[i, 1] - pred_xy[j, 1])
+            if d[j] <= radius_px and (best < 0 or pred_mag[j] < pred_mag[best]):
+                best = j
+        if best < 0 or not free_pred[best]:
+            continue
+        crowded = False
+        for j in range(len(pred_xy)):
+            if j != best and d[j] <= wide and pred_mag[j] - pred_mag[best] < min_delta_mag:
+                crowded = True
+                break
+        if crowded:
             continue
         # no other observed star may lie as near the bright star's prediction
-        rivals = np.hypot(obs_xy[:, 0] - pred_xy[best, 0], obs_xy[:, 1] - pred_xy[best, 1]) <= wide
-        if rivals.sum() != 1:
+        rivals = 0
+        for r in range(len(obs_xy)):
+            if math.hypot(obs_xy[r, 0] - pred_xy[best, 0], obs_xy[r, 1] - pred_xy[best, 1]) <= wide:
+                rivals += 1
+        if rivals != 1:
             continue
-        out_o.append(i)
-        out_p.append(int(best))
+        out_o[n_out] = i
+        out_p[n_out] = best
+        n_out += 1
         free_pred[best] = False
-    return np.asarray(out_o, np.int64), np.asarray(out_p, np.int64)
+    return out_o, out_p, n_out

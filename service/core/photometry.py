@@ -10,9 +10,8 @@ fainter than predicted is ordinary (saturation, a blend split by the catalogue, 
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
+from numba import njit
 
 from .types import FloatArray
 
@@ -24,43 +23,67 @@ MIN_PAIRS = 6
 """Fewer pairs than this are not tested (the fit would rest on the pair it judges)."""
 
 
-@lru_cache(maxsize=64)
-def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
-    return np.triu_indices(n, k=1)
-
-
 def theil_sen(x: FloatArray, y: FloatArray) -> tuple[float, float]:
     """Theil-Sen line ``y = intercept + slope x``: the median of the pairwise slopes, then the
-    intercept of the medians (what ``scipy.stats.theilslopes`` returns, ~100x faster for a few dozen
-    points since it skips the confidence interval)."""
-    i, j = _pairs(len(x))
-    dx = x[j] - x[i]
-    keep = dx != 0
-    if not keep.any():
-        return float("nan"), float("nan")
-    slope = float(np.median((y[j] - y[i])[keep] / dx[keep]))
-    return slope, float(np.median(y) - slope * np.median(x))
+    intercept of the medians (what ``scipy.stats.theilslopes`` returns, without its confidence
+    interval)."""
+    slope, intercept = _theil_sen(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(y, dtype=np.float64))
+    return float(slope), float(intercept)
+
+
+@njit(cache=True, nogil=True)
+def _theil_sen(xs: np.ndarray, ys: np.ndarray) -> tuple[float, float]:
+    k = len(xs)
+    slopes = np.empty(k * (k - 1) // 2)
+    n_s = 0
+    for i in range(k):
+        for j in range(i + 1, k):
+            dx = xs[j] - xs[i]
+            if dx != 0:
+                slopes[n_s] = (ys[j] - ys[i]) / dx
+                n_s += 1
+    if n_s == 0:
+        return np.nan, np.nan
+    slope = np.median(slopes[:n_s])
+    return slope, np.median(ys) - slope * np.median(xs)
 
 
 def too_bright(flux: FloatArray, cat_mag: FloatArray, *, threshold_mag: float = THRESHOLD_MAG,
                min_pairs: int = MIN_PAIRS) -> np.ndarray:
     """Mask of pairs whose observed star (``flux``, any linear unit) is brighter than the
-    catalogue magnitude ``cat_mag`` (V) allows under the fitted response."""
-    flux = np.asarray(flux, dtype=np.float64)
-    mag = np.asarray(cat_mag, dtype=np.float64)
-    out = np.zeros(len(flux), dtype=bool)
-    ok = np.isfinite(flux) & (flux > 0) & np.isfinite(mag)
-    if ok.sum() < min_pairs or np.ptp(mag[ok]) < 0.5:
+    catalogue magnitude ``cat_mag`` (V) allows under the fitted response (compiled:
+    :func:`too_bright_kernel`)."""
+    return too_bright_kernel(np.ascontiguousarray(flux, dtype=np.float64),
+                             np.ascontiguousarray(cat_mag, dtype=np.float64), float(threshold_mag), int(min_pairs))
+
+
+@njit(cache=True, nogil=True)
+def too_bright_kernel(flux: np.ndarray, mag: np.ndarray, threshold_mag: float, min_pairs: int) -> np.ndarray:
+    """Compiled body of :func:`too_bright` (the Theil-Sen fit on at most ``FIT_PAIRS`` evenly
+    spread pairs: as robust, cheaper)."""
+    n = len(flux)
+    out = np.zeros(n, dtype=np.bool_)
+    ok = np.empty(n, np.int64)
+    n_ok = 0
+    for i in range(n):
+        if np.isfinite(flux[i]) and flux[i] > 0 and np.isfinite(mag[i]):
+            ok[n_ok] = i
+            n_ok += 1
+    if n_ok < min_pairs:
         return out
-    inst = -2.5 * np.log10(flux[ok])
-    m = mag[ok]
-    step = -(-len(m) // FIT_PAIRS)  # the fit on at most FIT_PAIRS evenly spread pairs: as robust, cheaper
-    slope, intercept = theil_sen(m[::step], inst[::step])
+    m = mag[ok[:n_ok]]
+    if m.max() - m.min() < 0.5:
+        return out
+    inst = -2.5 * np.log10(flux[ok[:n_ok]])
+    step = -(-n_ok // FIT_PAIRS)
+    slope, intercept = _theil_sen(m[::step], inst[::step])
     if not np.isfinite(slope) or slope <= 0:
         return out  # no usable brightness information (e.g. fluxes that are only a rank)
-    resid = inst - (intercept + slope * mag[ok])  # negative: brighter than predicted
-    sigma = 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
-    out[np.flatnonzero(ok)] = resid < -max(threshold_mag, 4.0 * sigma)
+    resid = inst - (intercept + slope * m)  # negative: brighter than predicted
+    sigma = 1.4826 * np.median(np.abs(resid - np.median(resid)))
+    limit = -max(threshold_mag, 4.0 * sigma)
+    for i in range(n_ok):
+        out[ok[i]] = resid[i] < limit
     return out
 
 
@@ -80,19 +103,28 @@ def beyond_completeness(pair_mag: FloatArray, field_mag: FloatArray, field_paire
     ``m`` in its field. A pair whose catalogue star has most of the field's brighter stars
     unobserved is a false detection that fell near a faint catalogue star (a database deeper
     than the camera holds many). ``field_mag`` are the magnitudes of the catalogue stars
-    predicted inside the image, ``field_paired`` which of them are paired.
+    predicted inside the image, ``field_paired`` which of them are paired (compiled:
+    :func:`completeness_kernel`).
     """
-    pair_mag = np.asarray(pair_mag, dtype=np.float64)
-    out = np.zeros(len(pair_mag), dtype=bool)
+    return completeness_kernel(np.ascontiguousarray(pair_mag, dtype=np.float64),
+                               np.ascontiguousarray(field_mag, dtype=np.float64),
+                               np.ascontiguousarray(field_paired, dtype=np.bool_))
+
+
+@njit(cache=True, nogil=True)
+def completeness_kernel(pair_mag: np.ndarray, field_mag: np.ndarray, field_paired: np.ndarray) -> np.ndarray:
+    """Compiled body of :func:`beyond_completeness`."""
+    out = np.zeros(len(pair_mag), dtype=np.bool_)
     if len(pair_mag) < 3:
         return out
-    field_mag = np.asarray(field_mag, dtype=np.float64)
-    missed_mag = np.sort(field_mag[~np.asarray(field_paired, dtype=bool)])
-    paired_mag = np.sort(field_mag[np.asarray(field_paired, dtype=bool)])
-    gate = float(np.median(pair_mag)) + FAINT_GATE_MAG
-    for j in np.flatnonzero(pair_mag > gate):
-        missed = int(np.searchsorted(missed_mag, pair_mag[j], side="left"))
-        seen = int(np.searchsorted(paired_mag, pair_mag[j], side="left"))
+    missed_mag = np.sort(field_mag[~field_paired])
+    paired_mag = np.sort(field_mag[field_paired])
+    gate = np.median(pair_mag) + FAINT_GATE_MAG
+    for j in range(len(pair_mag)):
+        if pair_mag[j] <= gate:
+            continue
+        missed = np.searchsorted(missed_mag, pair_mag[j], side="left")
+        seen = np.searchsorted(paired_mag, pair_mag[j], side="left")
         if missed >= COMPLETENESS_MIN_MISSED and missed > COMPLETENESS_MAX_MISSED_FRACTION * (missed + seen):
             out[j] = True
     return out

@@ -73,6 +73,11 @@ class SolveOptions:
 
 DEFAULT_OPTIONS = SolveOptions()
 
+QUAD_REFUSE_STARS = 8
+"""A frame of at least this many stars that ``quad`` searched exhaustively (every pattern of
+its brightest stars, on every member) without a proof is refused without the fallback methods;
+measured with ``python -m bench.profile_default`` (docs/performance.md, Fast refusals)."""
+
 
 def solve(
     centroids: Centroids,
@@ -150,10 +155,13 @@ def solve_rig(
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
     # the coincidence bound is multiplied by
     plan = _plan(members, method_lists)
+    misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?
     for sigma in sigmas:
         for member, methods in plan:
+            if misses and all(misses) and len(obs) >= QUAD_REFUSE_STARS and "quad" not in methods:
+                continue  # fast refusal: the fallbacks would search the same stars (see QUAD_REFUSE_STARS)
             db = member
-            found, used, trials = _identify(obs, db, methods, sigma, options, deadline, hint, trials, tried)
+            found, used, trials = _identify(obs, db, methods, sigma, options, deadline, hint, trials, tried, misses)
             if found is not None or time.perf_counter() > deadline:
                 break
         if found is not None or time.perf_counter() > deadline:
@@ -213,6 +221,7 @@ def _refine(
 def _identify(
     obs: Observation, db: NavDatabase, methods: list[str], sigma: float, options: SolveOptions,
     deadline: float, hint: tuple[Quaternion, float] | None, trials: int, tried: list[str] | None = None,
+    misses: list[bool] | None = None,
 ) -> tuple[Verified | None, str, int]:
     """One pass of every method at centroid error ``sigma`` (px); ``trials`` hypotheses were
     already tried on this frame (they count in the coincidence bound). Appends the name of each
@@ -229,6 +238,8 @@ def _identify(
             tried.append(name)
         ctx = SolveContext(obs, verifier, tol, deadline, options.max_stars)
         found = get_matcher(db, name).identify(ctx) or verifier.best_marginal()
+        if name == "quad" and misses is not None:
+            misses.append(found is None and verifier.exhausted)
         if found is not None and hint is not None and not _near_hint(found.matrix, hint):
             found = None
         if found is not None:

@@ -120,3 +120,37 @@ def _stars_within(pts: np.ndarray, chord: float, cell: float, n_side: int, keys:
         out[i] = has_star_within(pts[i, 0], pts[i, 1], pts[i, 2], chord, cell, n_side, keys, starts,
                                  stars, vec, columns, -1, -1, -1)
     return out
+
+
+@njit(cache=True, nogil=True)
+def collect_within(px: float, py: float, pz: float, chord: float, cell: float, n_side: int,
+                   keys: np.ndarray, starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
+                   columns: np.ndarray, out: np.ndarray) -> int:
+    """Rows of the stars within ``chord`` of ``(px, py, pz)`` written to ``out`` (room for all);
+    returns how many. A grid of cells about the query's size keeps the scan short."""
+    lo_x = max(int(math.floor((px - chord + 1.0) / cell)), 0)
+    hi_x = min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1)
+    lo_y = max(int(math.floor((py - chord + 1.0) / cell)), 0)
+    hi_y = min(int(math.floor((py + chord + 1.0) / cell)), n_side - 1)
+    lo_z = max(int(math.floor((pz - chord + 1.0) / cell)), 0)
+    hi_z = min(int(math.floor((pz + chord + 1.0) / cell)), n_side - 1)
+    r2 = chord * chord
+    n = 0
+    for ix in range(lo_x, hi_x + 1):
+        for iy in range(lo_y, hi_y + 1):
+            col = ix * n_side + iy
+            for pos in range(columns[col], columns[col + 1]):
+                iz = keys[pos] - col * n_side
+                if iz < lo_z:
+                    continue
+                if iz > hi_z:
+                    break
+                for s in range(starts[pos], starts[pos + 1]):
+                    row = stars[s]
+                    dx = vec[row, 0] - px
+                    dy = vec[row, 1] - py
+                    dz = vec[row, 2] - pz
+                    if dx * dx + dy * dy + dz * dz <= r2:
+                        out[n] = row
+                        n += 1
+    return n

@@ -116,6 +116,9 @@ class Verifier:
     deadline: float = math.inf
     """``time.perf_counter()`` after which no further hypothesis is checked."""
     marginal: list[Verified] = field(default_factory=list)
+    exhausted: bool = False
+    """Set by a method (``quad``) that looked up every pattern of the frame's brightest stars
+    and proved none (the pipeline's fast refusal reads it)."""
     _first_marginal_at: int | None = None
     _near_cache: tuple[FloatArray, IntArray, IntArray] | None = field(default=None, repr=False)
 

@@ -14,6 +14,7 @@ from .maxangle import MaxAngle
 from .multifov import MultiFov
 from .pso import Pso
 from .pyramid import Pyramid
+from .quad import Quad
 from .radial import Radial
 from .triangle import Triangle
 
@@ -27,14 +28,17 @@ _REGISTRY: dict[str, Method] = {
         Dmv(),
         Pso(),
         MultiFov(),
+        Quad(),
     )
 }
 
-AUTO_ORDER: tuple[str, ...] = ("maxangle", "pyramid", "triangle")
+AUTO_ORDER: tuple[str, ...] = ("quad", "maxangle", "pyramid", "triangle")
 """``auto`` tries these in order, skipping methods whose tables the database lacks, then any
-other method the database holds. Measured by bench/bench_methods.py: ``maxangle`` is the
-fastest at every noise level, ``pyramid`` the most reliable at 1-2 px, and ``triangle`` the
-only one that proves 3-star frames (a uniquely matched triangle, see docs/methods.md)."""
+other method the database holds. ``quad`` (one compiled call, a hash lookup per pattern) goes
+first where the database holds it (the default database does; docs/performance.md). Measured
+by bench/bench_methods.py: ``maxangle`` is the fastest of the published methods at every noise
+level, ``pyramid`` the most reliable at 1-2 px, and ``triangle`` the only one that proves
+3-star frames (a uniquely matched triangle, see docs/methods.md)."""
 
 
 def method_names() -> list[str]:
@@ -63,14 +67,14 @@ def get_matcher(db: NavDatabase, name: str) -> Matcher:
 
 WIDE_FIELD_DEG = 15.0
 WIDE_NOISY_PX = 1.5
-WIDE_AUTO_ORDER: tuple[str, ...] = ("pso", "dmv", "maxangle", "pyramid", "triangle")
+WIDE_AUTO_ORDER: tuple[str, ...] = ("quad", "pso", "dmv", "maxangle", "pyramid", "triangle")
 """For fields of ``WIDE_FIELD_DEG`` and more at a declared centroid error of ``WIDE_NOISY_PX``
 or more. bench_methods (100 frames a point, git 8701d30) on the 20-deg camera (seed 004):
 ``maxangle`` 100% up to 1.25 px at 0.6-3.2 ms median, 98% at 1.5 px (11 ms), 71% at 1.75 px
 (43 ms), 35% at 2 px (105 ms), where ``pso`` holds 100% at 2.4-4.8 ms and ``dmv`` 100%; on the
 15.2-deg camera (seed 003) ``maxangle`` holds 100% to 2 px (0.4-2.5 ms). So below
 ``WIDE_NOISY_PX`` a wide field keeps ``AUTO_ORDER`` (maxangle first: 4x faster than pso at
-0 px), and from it on pso and dmv go first."""
+0 px), and from it on pso and dmv go first (after ``quad``, where the database holds it)."""
 
 
 def resolve(db: NavDatabase, name: str, *, fov_deg: float | None = None, sigma_px: float | None = None) -> list[str]:

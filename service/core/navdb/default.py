@@ -15,21 +15,21 @@ DEFAULT_NAME = "default"
 DEFAULT_MEMBERS: dict[str, BuildConfig] = {
     "narrow": BuildConfig(
         fov_min_deg=3.5, fov_max_deg=16.5, mag_limit=8.0, double_star_sep_deg=0.01,
-        density_cap=12, density_radius_deg=2.5, methods=("maxangle", "pyramid"),
+        density_cap=12, density_radius_deg=2.5, methods=("quad", "maxangle", "pyramid"),
         method_params={"maxangle": {"d_max_deg": 3.5}},
     ),
     "sparse": BuildConfig(
         fov_min_deg=3.5, fov_max_deg=9.0, mag_limit=7.0, double_star_sep_deg=0.01,
-        methods=("maxangle", "pyramid", "triangle"), method_params={"maxangle": {"d_max_deg": 3.5}},
+        methods=("quad", "maxangle", "pyramid", "triangle"), method_params={"maxangle": {"d_max_deg": 3.5}},
     ),
     "mid": BuildConfig(
         fov_min_deg=7.0, fov_max_deg=12.5, mag_limit=6.5, double_star_sep_deg=0.02,
-        density_cap=12, density_radius_deg=4.0, methods=("maxangle", "pyramid"),
+        density_cap=12, density_radius_deg=4.0, methods=("quad", "maxangle", "pyramid"),
         method_params={"maxangle": {"d_max_deg": 12.5}},
     ),
     "wide": BuildConfig(
         fov_min_deg=9.0, fov_max_deg=32.0, mag_limit=6.5, double_star_sep_deg=0.02,
-        density_cap=12, density_radius_deg=4.0, methods=("maxangle", "pyramid"),
+        density_cap=12, density_radius_deg=4.0, methods=("quad", "maxangle", "pyramid"),
     ),
 }
 """The default database set: a deep (V <= 8, density-capped) member for cameras of 3.5-16.5 deg

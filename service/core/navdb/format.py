@@ -23,9 +23,10 @@ from pathlib import Path
 
 FORMAT_NAME = "skyfix-navdb"
 SET_FORMAT_NAME = "skyfix-navdb-set"
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """2: the star-pair table is one shared group (``pairs/``) instead of one copy per method.
-3: ``stars/pm``, the proper motions, so a frame's epoch can be applied per request."""
+3: ``stars/pm``, the proper motions, so a frame's epoch can be applied per request.
+4: the ``quad`` pattern table in every member of the default database (auto's first pass)."""
 MANIFEST = "manifest.json"
 
 STAR_ARRAYS = {

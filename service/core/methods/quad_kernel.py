@@ -1,0 +1,337 @@
+"""The ``quad`` search as one compiled call: body vectors in, the first verified attitude out.
+
+Patterns of the brightest observed stars (4-combinations in brightness order: every pattern of
+stars ``0..3``, then those adding star 4, ...) are keyed like the table's (see
+:mod:`.quad_build`), looked up in every key bin their tolerance reaches, and each candidate
+whose six angles all agree within ``tol`` is labelled (the vertex order of the 24 that fits
+best) and tried as a hypothesis exactly as :class:`~service.core.verify.Verifier` would:
+
+1. attitude by Wahba's problem (:func:`~service.core.attitude.wahba_kernel`);
+2. screen: the brightest other stars must hit a catalogue star within 1.5 match radii
+   (:func:`~service.core.skygrid.has_star_within`, the verifier's screen);
+3. pairing and refits (:func:`~service.core.match._refine`), the near-miss test
+   (``_settle``, the verifier's ``SETTLE_FACTORS``) and the coincidence bound
+   ``P = trials * P[Binomial(n_free, p) >= n_extra]``.
+
+Every candidate that passes the angle test is a trial. A strong answer (``P <=
+strong_false_prob``) ends the search; a marginal one (``P <= max_false_prob``) is kept, and the
+search goes on for ``confirm_patterns`` more patterns, as the verifier does. The work is
+bounded inside the loop (``max_probes`` hash probes, ``max_checks`` full verifications), not by
+a clock between Python batches.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..match import _match_rig, _refine, _wahba_pairs
+from ..skygrid import collect_within, has_star_within
+from ..attitude import wahba_kernel
+from ..verify import SETTLE_FACTORS
+from .quad_build import FINE_BITS, FINE_STEPS, FINGER_BITS, N_RATIO_BINS, combine_key, key_hash, sorted_edges
+
+PERMS = np.array([[a, b, c, d] for a in range(4) for b in range(4) for c in range(4) for d in range(4)
+                  if len({a, b, c, d}) == 4], dtype=np.int64)
+"""The 24 vertex orders of a pattern."""
+EDGE_PAIRS = np.array([[i, j] for i in range(4) for j in range(i + 1, 4)], dtype=np.int64)
+MAX_MARGINAL = 8
+SETTLE = np.array(SETTLE_FACTORS, dtype=np.float64)
+NEAR_REUSE_COS = math.cos(math.radians(0.3))
+"""A gathered field is reused while the boresight moves less than this (its margin is 0.5 deg)."""
+
+FINGER_MASK = (1 << FINGER_BITS) - 1
+STATUS_NONE, STATUS_FOUND, STATUS_MARGINAL = 0, 1, 2
+
+
+@njit(cache=True, nogil=True)
+def binomial_tail(n: int, k: int, p: float) -> float:
+    """``P[Binomial(n, p) >= k]`` (= the regularised incomplete beta ``I_p(k, n - k + 1)``)."""
+    if k <= 0:
+        return 1.0
+    if k > n or p <= 0.0:
+        return 0.0
+    if p >= 1.0:
+        return 1.0
+    lp, lq = math.log(p), math.log1p(-p)
+    base = math.lgamma(n + 1.0)
+    total = 0.0
+    for j in range(k, n + 1):
+        total += math.exp(base - math.lgamma(j + 1.0) - math.lgamma(n - j + 1.0) + j * lp + (n - j) * lq)
+    return min(total, 1.0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _angle(u: np.ndarray, v: np.ndarray) -> float:
+    dx, dy, dz = u[0] - v[0], u[1] - v[1], u[2] - v[2]
+    return 2.0 * math.asin(min(math.sqrt(dx * dx + dy * dy + dz * dz) / 2.0, 1.0))
+
+
+@njit(cache=True, nogil=True)
+def _label(obs_vec: np.ndarray, o: np.ndarray, star_vec: np.ndarray, c: np.ndarray, tol: float,
+           out: np.ndarray) -> bool:
+    """The vertex order of catalogue stars ``c`` that best fits observed ``o`` (every angle
+    within ``tol``), written to ``out``; False if none fits."""
+    eo = np.empty(6)
+    ec = np.empty((4, 4))
+    for k in range(6):
+        i, j = EDGE_PAIRS[k, 0], EDGE_PAIRS[k, 1]
+        eo[k] = _angle(obs_vec[o[i]], obs_vec[o[j]])
+        ec[i, j] = ec[j, i] = _angle(star_vec[c[i]], star_vec[c[j]])
+    best = tol
+    found = False
+    for p in range(24):
+        worst = 0.0
+        for k in range(6):
+            err = abs(eo[k] - ec[PERMS[p, EDGE_PAIRS[k, 0]], PERMS[p, EDGE_PAIRS[k, 1]]])
+            if err > worst:
+                worst = err
+                if worst > best:
+                    break
+        if worst <= best:
+            best = worst
+            found = True
+            for i in range(4):
+                out[i] = c[PERMS[p, i]]
+    return found
+
+
+@njit(cache=True, nogil=True)
+def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bin, edge_max,
+                star_vec, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
+                g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord,
+                mounts, cams, dist, rows, row_off, radius_px, pixel_scale, max_false_prob, strong_false_prob,
+                confirm_patterns, screen_stars, trials0, max_probes, max_checks):
+    """Search ``obs_vec`` ``(N, 3)`` (brightest first; one camera) for a verified attitude.
+
+    Returns ``(status, hyp_obs, hyp_cat, m_obs, m_cat, r, prob, trials, n_patterns, exhausted,
+    marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials)``: ``status`` 1 with the
+    strong answer, 2 with marginal answers only (``marg_*``: matrices, bounds, pairs of each
+    ``k`` in ``marg_off[k]:marg_off[k + 1]``, trials), 0 with none. ``exhausted``: every
+    pattern of the ``n_use`` brightest stars was looked up within the work bounds.
+    """
+    n_obs = len(obs_vec)
+    n_use = min(n_use, n_obs)
+    mask = np.uint64(len(table) - 1)
+    radius_rad = radius_px * pixel_scale
+    quick_tol = radius_rad * 1.5
+    screen_chord = 1.5 * radius_rad
+    n_screen = min(n_obs, screen_stars + 3)
+    mount = mounts[0]
+    buf = np.empty(len(star_vec), np.int64)
+    near = np.zeros(0, np.int64)
+    near_bore = np.zeros(3)
+    o = np.empty(4, np.int64)
+    c = np.empty(4, np.int64)
+    lab = np.empty(4, np.int64)
+    e = np.empty(6)
+    ec = np.empty(6)
+    x = np.empty(6)
+    t = np.empty(6)
+    f_lo = np.empty(6, np.int64)
+    lo_fine = np.empty(6, np.int64)
+    hi_fine = np.empty(6, np.int64)
+    f_hi = np.empty(6, np.int64)
+    lo = np.empty(6, np.int64)
+    hi = np.empty(6, np.int64)
+    cur = np.empty(6, np.int64)
+    trials = trials0
+    probes = 0
+    checks = 0
+    cands = 0
+    n_pat = 0
+    first_marg = -1
+    marg_r = np.zeros((MAX_MARGINAL, 3, 3))
+    marg_prob = np.zeros(MAX_MARGINAL)
+    marg_trials = np.zeros(MAX_MARGINAL, np.int64)
+    marg_off = np.zeros(MAX_MARGINAL + 1, np.int64)
+    marg_obs = np.zeros(MAX_MARGINAL * n_obs, np.int64)
+    marg_cat = np.zeros(MAX_MARGINAL * n_obs, np.int64)
+    n_marg = 0
+    exhausted = True
+    empty = np.zeros(0, np.int64)
+    for d in range(3, n_use):
+        for a in range(d):
+            for b in range(a + 1, d):
+                for cc in range(b + 1, d):
+                    if first_marg >= 0 and n_pat - first_marg >= confirm_patterns:
+                        return (STATUS_MARGINAL, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, False,
+                                marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1],
+                                marg_obs[:marg_off[n_marg]], marg_cat[:marg_off[n_marg]], marg_trials[:n_marg], probes, cands)
+                    if probes > max_probes or checks > max_checks:
+                        exhausted = False
+                        break
+                    o[0], o[1], o[2], o[3] = a, b, cc, d
+                    n_pat += 1
+                    sorted_edges(obs_vec, o, e)
+                    big = e[5]
+                    if big > edge_max + tol or big <= 4 * tol:
+                        continue
+                    total = 1
+                    for i in range(6):
+                        if i < 5:
+                            x[i] = e[i] / big / ratio_bin
+                            t[i] = tol * (1.0 + e[i] / big) / big / ratio_bin
+                        else:
+                            x[i] = big / edge_bin
+                            t[i] = tol / edge_bin
+                        lo[i] = max(int(x[i] - t[i]), 0)
+                        hi[i] = int(x[i] + t[i])
+                        if i < 5:
+                            hi[i] = min(hi[i], N_RATIO_BINS - 1)
+                        total *= hi[i] - lo[i] + 1
+                    probes += total
+                    for i in range(6):
+                        cur[i] = lo[i]
+                    for i in range(6):  # where the query's range lies inside its first and last bin
+                        lo_fine[i] = max(int((x[i] - t[i] - lo[i]) * FINE_STEPS), 0)
+                        hi_fine[i] = min(int((x[i] + t[i] - hi[i]) * FINE_STEPS), FINE_STEPS - 1)
+                    for _ in range(total):
+                        for i in range(6):
+                            f_lo[i] = lo_fine[i] if cur[i] == lo[i] else 0
+                            f_hi[i] = hi_fine[i] if cur[i] == hi[i] else FINE_STEPS - 1
+                        h = key_hash(combine_key(cur))
+                        finger = np.int64(h >> np.uint64(64 - FINGER_BITS))
+                        sl = h & mask
+                        while table[sl] != 0:
+                            word = table[sl]
+                            sl = (sl + np.uint64(1)) & mask
+                            if (word >> (6 * FINE_BITS)) & FINGER_MASK != finger:
+                                continue
+                            inside = True
+                            for i in range(6):
+                                fi = (word >> (FINE_BITS * (5 - i))) & (FINE_STEPS - 1)
+                                if fi < f_lo[i] or fi > f_hi[i]:
+                                    inside = False
+                                    break
+                            if not inside:
+                                continue
+                            p = (word >> 32) - 1
+                            cands += 1
+                            for i in range(4):
+                                c[i] = patterns[p, i]
+                            sorted_edges(star_vec, c, ec)
+                            fits = True
+                            for i in range(6):
+                                if abs(ec[i] - e[i]) > tol:
+                                    fits = False
+                                    break
+                            if fits and _label(obs_vec, o, star_vec, c, tol, lab):
+                                trials += 1
+                                checks += 1
+                                res = _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord,
+                                              s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
+                                              g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
+                                              near_chord, mount, buf, near, near_bore, mounts, cams, dist,
+                                              rows, row_off, radius_px, quick_tol, trials)
+                                ok, m_obs, m_cat, r, prob, near, near_bore = res
+                                if ok and prob <= max_false_prob:
+                                    if prob <= strong_false_prob:
+                                        return (STATUS_FOUND, o.copy(), lab.copy(), m_obs, m_cat, r, prob,
+                                                trials, n_pat, False, marg_r[:0], marg_prob[:0],
+                                                marg_off[:1], empty, empty, marg_trials[:0], probes, cands)
+                                    if n_marg < MAX_MARGINAL:
+                                        marg_r[n_marg] = r
+                                        marg_prob[n_marg] = prob
+                                        marg_trials[n_marg] = trials
+                                        k0 = marg_off[n_marg]
+                                        marg_obs[k0:k0 + len(m_obs)] = m_obs
+                                        marg_cat[k0:k0 + len(m_obs)] = m_cat
+                                        marg_off[n_marg + 1] = k0 + len(m_obs)
+                                        n_marg += 1
+                                    if first_marg < 0:
+                                        first_marg = n_pat
+                        for i in range(6):  # next bin combination
+                            cur[i] += 1
+                            if cur[i] <= hi[i]:
+                                break
+                            cur[i] = lo[i]
+                if not exhausted:
+                    break
+            if not exhausted:
+                break
+        if not exhausted:
+            break
+    status = STATUS_MARGINAL if n_marg else STATUS_NONE
+    return (status, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, exhausted and n_marg == 0,
+            marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1], marg_obs[:marg_off[n_marg]],
+            marg_cat[:marg_off[n_marg]], marg_trials[:n_marg], probes, cands)
+
+
+@njit(cache=True, nogil=True)
+def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s_side, s_keys, s_starts,
+            s_stars, s_columns, g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, mount, buf,
+            near, near_bore, mounts, cams, dist, rows, row_off, radius_px, quick_tol, trials):
+    """One hypothesis (observed rows ``o`` are catalogue rows ``lab``) through the verifier's
+    steps. Returns ``(ok, m_obs, m_cat, r, prob, near, near_bore)`` (the gathered field is
+    handed back for reuse)."""
+    empty = np.zeros(0, np.int64)
+    r = wahba_kernel(obs_vec[o], star_vec[lab], np.ones(4))
+    n_obs = len(obs_vec)
+    if n_obs > 4:  # the screen: some other bright star must land on a catalogue star
+        hits = 0
+        for m in range(n_screen):
+            if m == o[0] or m == o[1] or m == o[2] or m == o[3]:
+                continue
+            v = obs_vec[m]
+            px = r[0, 0] * v[0] + r[1, 0] * v[1] + r[2, 0] * v[2]
+            py = r[0, 1] * v[0] + r[1, 1] * v[1] + r[2, 1] * v[2]
+            pz = r[0, 2] * v[0] + r[1, 2] * v[1] + r[2, 2] * v[2]
+            if has_star_within(px, py, pz, screen_chord, s_cell, s_side, s_keys, s_starts, s_stars, star_vec,
+                               s_columns, lab[0], lab[1], lab[2]):
+                hits += 1
+                break
+        if hits == 0:
+            return False, empty, empty, r, 1.0, near, near_bore
+    near, near_bore = _field(r, mount, near, near_bore, near_chord, g_cell, g_side, g_keys, g_starts, g_stars,
+                             star_vec, g_columns, buf)
+    near_off = np.array([0, len(near)], np.int64)
+    ok, m_obs, m_cat, p_single, r = _refine(obs_vec, obs_xy, star_vec, o, lab, r, quick_tol, near, near_off,
+                                            mounts, cams, dist, rows, row_off, radius_px, 4)
+    if not ok:
+        return False, empty, empty, r, 1.0, near, near_bore
+    n_pairs = len(m_obs)
+    for f in range(len(SETTLE)):  # the verifier's near-miss test (Verifier._settle)
+        near, near_bore = _field(r, mount, near, near_bore, near_chord, g_cell, g_side, g_keys, g_starts,
+                                 g_stars, star_vec, g_columns, buf)
+        near_off[1] = len(near)
+        w_obs, w_cat, _ = _match_rig(r, obs_xy, star_vec, near, near_off, mounts, cams, dist, rows, row_off,
+                                     SETTLE[f] * radius_px, 1.0)
+        if len(w_obs) <= n_pairs + max(3, n_pairs // 3):
+            continue
+        r2 = _wahba_pairs(obs_vec, star_vec, w_obs, w_cat)
+        near, near_bore = _field(r2, mount, near, near_bore, near_chord, g_cell, g_side, g_keys, g_starts,
+                                 g_stars, star_vec, g_columns, buf)
+        near_off[1] = len(near)
+        ok2, s_obs, s_cat, p2, r2 = _refine(obs_vec, obs_xy, star_vec, w_obs[:0], w_cat[:0], r2, 1.0, near,
+                                            near_off, mounts, cams, dist, rows, row_off, radius_px, 4)
+        if not ok2 or len(s_obs) <= n_pairs:
+            continue
+        m_obs, m_cat, p_single, r = s_obs, s_cat, p2, r2
+        n_pairs = len(m_obs)
+    n_hyp = 0
+    for i in range(len(m_obs)):
+        if m_obs[i] == o[0] or m_obs[i] == o[1] or m_obs[i] == o[2] or m_obs[i] == o[3]:
+            n_hyp += 1
+    n_extra = len(m_obs) - n_hyp
+    n_free = n_obs - 4
+    if len(m_obs) < 4 or n_extra < 1:
+        return False, empty, empty, r, 1.0, near, near_bore
+    tail = binomial_tail(n_free, n_extra, min(p_single, 1.0)) if n_free >= n_extra else 1.0
+    prob = min(1.0, tail * max(trials, 1))
+    return True, m_obs, m_cat, r, prob, near, near_bore
+
+
+@njit(cache=True, nogil=True)
+def _field(r, mount, near, near_bore, chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec, g_columns, buf):
+    """The catalogue rows near the boresight under ``r``, reusing the last gathering while the
+    boresight stays within 0.3 deg of it (the verifier's ``_near`` cache)."""
+    rc = mount @ r
+    dot = rc[2, 0] * near_bore[0] + rc[2, 1] * near_bore[1] + rc[2, 2] * near_bore[2]
+    if len(near) and dot >= NEAR_REUSE_COS:
+        return near, near_bore
+    n = collect_within(rc[2, 0], rc[2, 1], rc[2, 2], chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec,
+                       g_columns, buf)
+    return buf[:n].copy(), rc[2].copy()

@@ -1,0 +1,113 @@
+"""``quad``: 4-star patterns hashed by shape, searched and verified in one compiled call."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.special import betainc
+
+from service.core.methods import get_matcher
+from service.core.methods.quad_build import build_quad_table, field_scales
+from service.core.methods.quad_kernel import STATUS_FOUND, binomial_tail
+from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
+from service.core.pipeline import SolveOptions, _observation, solve
+from service.core.sim import SimConfig, random_points, simulate_frames
+from service.core.types import SolveStatus
+from service.core.verify import Verifier
+from tests.conftest import SEED000_CAMERA
+
+CAM = SEED000_CAMERA
+OPTS = SolveOptions(centroid_sigma_px=1.0)
+
+
+@pytest.fixture(scope="module")
+def quad_db(tmp_path_factory: pytest.TempPathFactory) -> NavDatabase:
+    """Seed 000's camera (8.6 deg, V <= 6.5) with the quad table only."""
+    path = tmp_path_factory.mktemp("quad") / "seed000"
+    build_database(path, BuildConfig(fov_min_deg=CAM.fov_deg, fov_max_deg=CAM.diagonal_fov_deg + 0.2,
+                                     mag_limit=6.5, epoch=2026.0, methods=("quad",)))
+    return open_database(path)
+
+
+def _right(sol, frame) -> bool:  # every matched star is the truth's (a false star never is)
+    truth = frame.hip
+    return all(int(truth[s.centroid]) == s.hip for s in sol.stars)
+
+
+def test_identifies_noisy_frames_with_false_and_missing_stars(quad_db: NavDatabase) -> None:
+    config = SimConfig(mag_limit=6.5, centroid_noise_px=1.0, false_stars=2, missing_prob=0.1)
+    frames = simulate_frames(CAM, 40, config, rng=11)
+    solved = 0
+    for f in frames:
+        sol = solve(f.centroids, CAM, quad_db, method="quad", options=OPTS)
+        if sol.solved:
+            assert sol.method == "quad" and _right(sol, f), "a wrong identification"
+            assert sol.false_match_probability is not None and sol.false_match_probability <= OPTS.max_false_prob
+            solved += 1
+    assert solved >= 36
+
+
+def test_random_points_are_refused_after_an_exhaustive_search(quad_db: NavDatabase) -> None:
+    rng = np.random.default_rng(5)
+    matcher = get_matcher(quad_db, "quad")
+    tol = (3.0 * math.sqrt(2.0) + 0.5) * CAM.pixel_scale_rad
+    for _ in range(20):
+        c = random_points(CAM, int(rng.integers(8, 40)), rng)
+        assert solve(c, CAM, quad_db, method="quad", options=OPTS).status is SolveStatus.NO_SOLUTION
+        obs = _observation([(c, CAM, None)], [np.eye(3)])
+        res = matcher.search(obs, Verifier(quad_db, obs, match_radius_px=3.0), tol)
+        assert res[0] != STATUS_FOUND and res[9], "every pattern of the brightest stars looked up"
+
+
+def test_answers_agree_with_the_shared_verifier(quad_db: NavDatabase) -> None:
+    """The compiled verification is the Verifier's: the same pairs, attitude and coincidence bound."""
+    matcher = get_matcher(quad_db, "quad")
+    tol = (3.0 * math.sqrt(2.0) + 0.5) * CAM.pixel_scale_rad
+    config = SimConfig(mag_limit=6.5, centroid_noise_px=1.0, false_stars=2)
+    checked = 0
+    for f in simulate_frames(CAM, 15, config, rng=3):
+        obs = _observation([(f.centroids, CAM, None)], [np.eye(3)])
+        status, hyp_obs, hyp_cat, m_obs, m_cat, r, prob, trials = matcher.search(
+            obs, Verifier(quad_db, obs, match_radius_px=3.0), tol)[:8]
+        if status != STATUS_FOUND:
+            continue
+        ref = Verifier(quad_db, obs, match_radius_px=3.0).check(hyp_obs, hyp_cat, n_trials=int(trials))
+        assert ref is not None
+        assert set(zip(ref.obs.tolist(), ref.cat.tolist())) == set(zip(m_obs.tolist(), m_cat.tolist()))
+        assert ref.false_prob == pytest.approx(prob, rel=1e-9, abs=1e-300)
+        np.testing.assert_allclose(ref.matrix, r, atol=1e-9)
+        checked += 1
+    assert checked >= 13
+
+
+@pytest.mark.parametrize(("n", "k", "p"), [(10, 1, 0.01), (30, 5, 0.02), (200, 12, 0.003), (5, 5, 0.5), (8, 9, 0.1)])
+def test_binomial_tail_is_the_incomplete_beta(n: int, k: int, p: float) -> None:
+    want = float(betainc(k, n - k + 1, p)) if k <= n else 0.0
+    assert binomial_tail(n, k, p) == pytest.approx(want, rel=1e-10, abs=1e-300)
+
+
+def test_table_finds_every_pattern_of_a_field() -> None:
+    """Each lattice field's patterns are stored once; a degenerate ladder has one field size."""
+    rng = np.random.default_rng(1)
+    vec = rng.normal(size=(3000, 3))
+    vec /= np.linalg.norm(vec, axis=1, keepdims=True)
+    tables, used = build_quad_table(vec, np.arange(3000), 10.0, 20.0, {})
+    pats = tables["patterns"].astype(np.int64)
+    assert len(np.unique(pats, axis=0)) == len(pats) == used["n_patterns"] > 1000
+    assert np.all(np.diff(pats, axis=1) > 0)
+    table = tables["table"]
+    assert np.count_nonzero(table) == len(pats) and len(table) & (len(table) - 1) == 0
+    assert sorted((table[table != 0] >> 32) - 1) == list(range(len(pats)))
+    assert field_scales(5.0, 5.0).tolist() == [5.0] and field_scales(3.5, 16.5)[-1] == pytest.approx(16.5)
+
+
+def test_auto_answers_with_quad_on_the_default_database(default_set_db) -> None:
+    f = simulate_frames(CAM, 3, SimConfig(mag_limit=6.5, centroid_noise_px=0.5, false_stars=1), rng=2)
+    for frame in f:
+        sol = solve(frame.centroids, CAM, default_set_db, options=OPTS)
+        assert sol.solved and sol.method == "quad" and _right(sol, frame)
+    rng = np.random.default_rng(9)
+    sol = solve(random_points(CAM, 25, rng), CAM, default_set_db, options=OPTS)
+    assert sol.status is SolveStatus.NO_SOLUTION and set(sol.methods_tried) == {"quad"}  # fast refusal

@@ -21,6 +21,7 @@ from .blends import dominant_pairs
 from .camera import Camera
 from .errors import InvalidInputError
 from .methods import SolveContext, get_matcher, resolve
+from .methods.quad import QUERY_STARS
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .photometry import FAINT_GATE_MAG, beyond_completeness, too_bright
 from .refusal import no_solution, refusal
@@ -75,8 +76,14 @@ DEFAULT_OPTIONS = SolveOptions()
 
 QUAD_REFUSE_STARS = 8
 """A frame of at least this many stars that ``quad`` searched exhaustively (every pattern of
-its brightest stars, on every member) without a proof is refused without the fallback methods;
-measured with ``python -m bench.profile_default`` (docs/performance.md, Fast refusals)."""
+its brightest stars, on every member) without a proof is refused without the fallback methods
+when ``quad`` looked at all of its stars, and gives the fallbacks only
+``EXHAUSTED_BUDGET_MS`` when it holds more (bright false detections, as branches in a real
+image, can hide the stars from the brightest ``QUERY_STARS``); measured with
+``python -m bench.profile_default`` (docs/performance.md, Fast refusals)."""
+EXHAUSTED_BUDGET_MS = 50.0
+"""Time the fallback methods get after ``quad`` searched a frame exhaustively (see
+``QUAD_REFUSE_STARS``)."""
 
 
 def solve(
@@ -156,15 +163,19 @@ def solve_rig(
     # the coincidence bound is multiplied by
     plan = _plan(members, method_lists)
     misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?
+    search_deadline = deadline  # shortened after an exhaustive quad miss (EXHAUSTED_BUDGET_MS)
     for sigma in sigmas:
         for member, methods in plan:
             if misses and all(misses) and len(obs) >= QUAD_REFUSE_STARS and "quad" not in methods:
-                continue  # fast refusal: the fallbacks would search the same stars (see QUAD_REFUSE_STARS)
+                if len(obs) <= QUERY_STARS:
+                    continue  # fast refusal: the fallbacks would search the same stars (see QUAD_REFUSE_STARS)
+                search_deadline = min(search_deadline, time.perf_counter() + EXHAUSTED_BUDGET_MS / 1e3)
             db = member
-            found, used, trials = _identify(obs, db, methods, sigma, options, deadline, hint, trials, tried, misses)
-            if found is not None or time.perf_counter() > deadline:
+            found, used, trials = _identify(obs, db, methods, sigma, options, search_deadline, hint, trials, tried,
+                                            misses)
+            if found is not None or time.perf_counter() > search_deadline:
                 break
-        if found is not None or time.perf_counter() > deadline:
+        if found is not None or time.perf_counter() > search_deadline:
             break
     t2 = time.perf_counter()
     timings["identify"] = (t2 - t1) * 1e3

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .answer import compiled_checks
 from .apparent import aberrate, apparent_directions
 from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
 from .blends import dominant_pairs
@@ -371,18 +372,35 @@ def _stars_in_field(obs: Observation, db: NavDatabase, r_body: np.ndarray) -> Fi
     return out
 
 
-def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_rad: float,
-              options: SolveOptions = DEFAULT_OPTIONS) -> Solution:
-    moved = options.epoch is not None or options.observer_velocity_km_s is not None
+def checked_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: float) -> tuple[Verified, bool]:
+    """``v`` after the checks of a proven answer, and whether its pairs changed: the blobs of
+    close doubles named as their dominant star, then the implausible pairs dropped (far too
+    bright for their catalogue star, or fainter than the frame's completeness). Any number of
+    cameras; :func:`service.core.answer.compiled_checks` is the same for one camera, compiled."""
+    moved = False
     field = _stars_in_field(obs, db, v.matrix)
-    blended = _blend_pairs(obs, db, v, options.match_radius_px or max(2.5, 3.0 * sigma_rad / obs.pixel_scale_rad),
-                           field)
+    blended = _blend_pairs(obs, db, v, radius_px, field)
     if blended is not None:
         v, moved = blended, True
     implausible = _implausible_pairs(obs, db, v, field)  # also judges the blends just named
     if implausible.any():  # false detections paired with faint catalogue stars by position alone
         v = Verified(v.obs[~implausible], v.cat[~implausible], v.matrix, v.false_prob, v.n_trials)
         moved = True
+    return v, moved
+
+
+def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_rad: float,
+              options: SolveOptions = DEFAULT_OPTIONS) -> Solution:
+    moved = options.epoch is not None or options.observer_velocity_km_s is not None
+    radius = options.match_radius_px or max(2.5, 3.0 * sigma_rad / obs.pixel_scale_rad)
+    checked = compiled_checks(obs, db, v.obs, v.cat, v.matrix, radius)  # one camera: compiled
+    if checked is None:
+        v, changed = checked_pairs(obs, db, v, radius)
+    else:
+        changed = checked[2]
+        if changed:
+            v = Verified(checked[0], checked[1], v.matrix, v.false_prob, v.n_trials)
+    moved = moved or changed
     ref, seen = _apparent(db, v.cat, options)
     fit = estimate(obs.vec[v.obs], seen, matrix=None if moved else v.matrix, prior_sigma_rad=sigma_rad)
     ra, dec, roll = radec_roll(fit.matrix)

@@ -1,0 +1,153 @@
+"""The checks of a proven answer as one compiled call (one camera).
+
+What :func:`service.core.pipeline._solution` does to a verified identification before the final
+fit, for a single camera: project the catalogue stars of the field under the answer's attitude,
+name the blobs of close doubles as their dominant star (:func:`~service.core.blends.dominant_kernel`),
+and drop the pairs whose observed star is far too bright for its catalogue star
+(:func:`~service.core.photometry.too_bright_kernel`) or whose catalogue star is fainter than the
+frame's completeness (:func:`~service.core.photometry.completeness_kernel`). The same kernels as
+the Python path, without its k-d tree query and its per-camera numpy calls (rigs keep the Python
+path).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .blends import MIN_DELTA_MAG, dominant_kernel
+from .navdb.reader import NavDatabase
+from .photometry import FAINT_GATE_MAG, MIN_PAIRS, THRESHOLD_MAG, completeness_kernel, too_bright_kernel
+from .skygrid import SkyGrid, build_sky_grid, collect_within
+from .types import IntArray
+
+FIELD_CELL_DEG = 1.0
+"""Cell of the grid that gathers a field's catalogue stars (about the field's size / 10)."""
+FIELD_MARGIN_DEG = 0.1
+"""The field's stars are gathered this far beyond the image's half-diagonal."""
+
+
+def field_grid(db: NavDatabase) -> SkyGrid:
+    """The database's stars on a grid of ``FIELD_CELL_DEG`` cells (built once per opened
+    database), for gathering a whole field in a compiled kernel."""
+    cache = db.__dict__.setdefault("_cache", {})
+    if "field_grid" not in cache:
+        cache["field_grid"] = build_sky_grid(np.asarray(db.stars.vec), cell_rad=math.radians(FIELD_CELL_DEG))
+    return cache["field_grid"]
+
+
+def star_mags(db: NavDatabase) -> np.ndarray:
+    """The star magnitudes as float64 (once per opened database)."""
+    cache = db.__dict__.setdefault("_cache", {})
+    if "mag64" not in cache:
+        cache["mag64"] = np.asarray(db.stars.mag, dtype=np.float64)
+    return cache["mag64"]
+
+
+def compiled_checks(obs, db: NavDatabase, m_obs: IntArray, m_cat: IntArray, r: np.ndarray,
+                    radius_px: float) -> tuple[IntArray, IntArray, bool] | None:
+    """The pairs of a one-camera answer after the blend and plausibility checks, and whether
+    they changed; None for a rig (several cameras: the Python path)."""
+    if len(obs.cameras) != 1:
+        return None
+    cam = obs.cameras[0]
+    k = obs.kernel_arrays
+    g = field_grid(db)
+    chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + FIELD_MARGIN_DEG) / 2)
+    flux = obs.flux if obs.flux is not None else np.zeros(0)
+    o, c, moved = answer_kernel(obs.xy, flux, obs.flux is not None, m_obs, m_cat, np.ascontiguousarray(r),
+                                np.ascontiguousarray(db.stars.vec, dtype=np.float64), star_mags(db),
+                                g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, chord, k.mounts[0],
+                                k.cams[0], k.dist[0], float(radius_px))
+    return o, c, moved
+
+
+@njit(cache=True, nogil=True)
+def field_stars(r_cam: np.ndarray, chord: float, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray,
+                stars: np.ndarray, columns: np.ndarray, star_vec: np.ndarray, cam: np.ndarray,
+                dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Catalogue rows predicted inside the image under ``r_cam`` (ICRS -> camera) and their
+    pixel positions (pinhole + Brown-Conrady, as :meth:`~service.core.camera.Camera.vector_to_pixel`)."""
+    buf = np.empty(len(star_vec), np.int64)
+    n = collect_within(r_cam[2, 0], r_cam[2, 1], r_cam[2, 2], chord, cell, n_side, keys, starts, stars, star_vec,
+                       columns, buf)
+    f, cx, cy, w, h = cam[0], cam[1], cam[2], cam[3], cam[4]
+    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
+    distorted = k1 != 0 or k2 != 0 or p1 != 0 or p2 != 0 or k3 != 0
+    rows = np.empty(n, np.int64)
+    pxy = np.empty((n, 2))
+    m = 0
+    for i in range(n):
+        v = star_vec[buf[i]]
+        z = r_cam[2, 0] * v[0] + r_cam[2, 1] * v[1] + r_cam[2, 2] * v[2]
+        if z <= 1e-9:
+            continue
+        xn = (r_cam[0, 0] * v[0] + r_cam[0, 1] * v[1] + r_cam[0, 2] * v[2]) / z
+        yn = (r_cam[1, 0] * v[0] + r_cam[1, 1] * v[1] + r_cam[1, 2] * v[2]) / z
+        if distorted:
+            r2 = xn * xn + yn * yn
+            radial = 1 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
+            xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
+            yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
+            xn, yn = xd, yd
+        x = f * xn + cx
+        y = f * yn + cy
+        if x >= -0.5 and x <= w - 0.5 and y >= -0.5 and y <= h - 0.5:
+            rows[m] = buf[i]
+            pxy[m, 0] = x
+            pxy[m, 1] = y
+            m += 1
+    return rows[:m].copy(), pxy[:m].copy()
+
+
+@njit(cache=True, nogil=True)
+def _member(rows: np.ndarray, of: np.ndarray) -> np.ndarray:
+    out = np.zeros(len(rows), np.bool_)
+    for i in range(len(rows)):
+        for j in range(len(of)):
+            if rows[i] == of[j]:
+                out[i] = True
+                break
+    return out
+
+
+@njit(cache=True, nogil=True)
+def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, cell, n_side, keys, starts, stars,
+                  columns, chord, mount, cam, dist, radius_px):
+    """``(obs rows, catalogue rows, changed)`` of an answer after the checks of
+    :func:`service.core.pipeline._solution` (blends named, implausible pairs dropped)."""
+    r_cam = mount @ r
+    rows, pxy = field_stars(r_cam, chord, cell, n_side, keys, starts, stars, columns, star_vec, cam, dist)
+    moved = False
+    # blends: the free observed stars against the unpaired catalogue stars of the field
+    taken = np.zeros(len(obs_xy), np.bool_)
+    for i in m_obs:
+        taken[i] = True
+    n_free = len(obs_xy) - np.count_nonzero(taken)
+    if n_free > 0:
+        unpaired = ~_member(rows, m_cat)
+        if unpaired.any():
+            mine = np.flatnonzero(~taken)
+            cand = rows[unpaired]
+            mag = star_mag[cand]
+            faintest = star_mag[m_cat].max()
+            o, p, n = dominant_kernel(obs_xy, mine, pxy[unpaired], mag, mag <= faintest + 0.5, radius_px, 2.0,
+                                      MIN_DELTA_MAG)
+            if n > 0:
+                m_obs = np.concatenate((m_obs, o[:n]))
+                m_cat = np.concatenate((m_cat, cand[p[:n]]))
+                moved = True
+    # plausibility: too bright for its catalogue star, or fainter than the frame's completeness
+    pair_mag = star_mag[m_cat]
+    bad = np.zeros(len(m_obs), np.bool_)
+    if has_flux:
+        bad |= too_bright_kernel(flux[m_obs], pair_mag, THRESHOLD_MAG, MIN_PAIRS)
+    if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
+        field = np.unique(rows)
+        bad |= completeness_kernel(pair_mag, star_mag[field], _member(field, m_cat))
+    if bad.any():
+        m_obs, m_cat = m_obs[~bad], m_cat[~bad]
+        moved = True
+    return m_obs, m_cat, moved

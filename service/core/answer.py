@@ -17,11 +17,14 @@ import math
 import numpy as np
 from numba import njit
 
+from .attitude import wahba_svd
 from .blends import MIN_DELTA_MAG, dominant_kernel
+from .methods.quad_kernel import verify_pairs
 from .navdb.reader import NavDatabase
 from .photometry import FAINT_GATE_MAG, MIN_PAIRS, THRESHOLD_MAG, completeness_kernel, too_bright_kernel
 from .skygrid import SkyGrid, build_sky_grid, collect_within
 from .types import IntArray
+from .verify import NEAR_MARGIN_DEG
 
 FIELD_CELL_DEG = 1.0
 """Cell of the grid that gathers a field's catalogue stars (about the field's size / 10)."""
@@ -62,6 +65,29 @@ def compiled_checks(obs, db: NavDatabase, m_obs: IntArray, m_cat: IntArray, r: n
                                 g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, chord, k.mounts[0],
                                 k.cams[0], k.dist[0], float(radius_px))
     return o, c, moved
+
+
+def recheck(obs, db: NavDatabase, obs_idx: IntArray, cat_idx: IntArray, n_trials: int, radius_px: float
+            ) -> tuple[bool, IntArray, IntArray, np.ndarray, float] | None:
+    """:meth:`~service.core.verify.Verifier.check` of the pairs ``obs_idx`` -> ``cat_idx`` in
+    ``db`` (one camera) as one compiled call: ``(ok, obs rows, catalogue rows, ICRS -> body
+    matrix, false-match bound with n_trials hypotheses)``; None for a rig (the Python path)."""
+    if len(obs.cameras) != 1:
+        return None
+    cam = obs.cameras[0]
+    k = obs.kernel_arrays
+    g = field_grid(db)
+    star_vec = np.ascontiguousarray(db.stars.vec, dtype=np.float64)
+    obs_idx = np.ascontiguousarray(obs_idx, dtype=np.int64)
+    cat_idx = np.ascontiguousarray(cat_idx, dtype=np.int64)
+    near_chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG) / 2)
+    r = wahba_svd(obs.vec[obs_idx], star_vec[cat_idx])
+    ok, m_obs, m_cat, r, prob, _, _ = verify_pairs(
+        obs.vec, obs.xy, star_vec, obs_idx, cat_idx, np.ascontiguousarray(r), g.cell, g.n_side, g.keys, g.starts,
+        g.stars, g.columns, near_chord, k.mounts[0], np.empty(len(star_vec), np.int64), np.zeros(0, np.int64),
+        np.zeros(3), k.mounts, k.cams, k.dist, k.rows, k.row_off, float(radius_px),
+        1.5 * radius_px * obs.pixel_scale_rad, int(n_trials))
+    return bool(ok), m_obs, m_cat, r, float(prob)
 
 
 @njit(cache=True, nogil=True)

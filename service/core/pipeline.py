@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .answer import compiled_checks
+from .answer import compiled_checks, recheck
 from .apparent import aberrate, apparent_directions
 from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
 from .blends import dominant_pairs
@@ -222,9 +222,15 @@ def _refine(
     if known.sum() < 3:
         return None
     radius = options.match_radius_px or max(2.5, 3.0 * sigma)
-    verifier = Verifier(deeper, obs, match_radius_px=radius, max_false_prob=options.max_false_prob,
-                        trials=found.n_trials)
-    refined = verifier.check(found.obs[known], rows[known], n_trials=found.n_trials)
+    compiled = recheck(obs, deeper, found.obs[known], rows[known], found.n_trials, radius)  # one camera
+    if compiled is None:
+        verifier = Verifier(deeper, obs, match_radius_px=radius, max_false_prob=options.max_false_prob,
+                            trials=found.n_trials)
+        refined = verifier.check(found.obs[known], rows[known], n_trials=found.n_trials)
+    else:  # a proof as strong as Verifier.check asks of an answer (a marginal one adds nothing here)
+        ok, m_obs, m_cat, r, prob = compiled
+        strong = ok and prob <= min(options.max_false_prob, Verifier.strong_false_prob)
+        refined = Verified(m_obs, m_cat, r, prob, found.n_trials) if strong else None
     if refined is None or len(refined.obs) <= len(found.obs):
         return None
     return refined

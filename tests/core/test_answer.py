@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from service.core.answer import compiled_checks
+from service.core.answer import compiled_checks, recheck
 from service.core.navdb import NavDatabase
 from service.core.pipeline import _observation, _stars_in_field, checked_pairs
 from service.core.sim import SimConfig, simulate_frames
@@ -41,3 +42,31 @@ def test_compiled_checks_give_the_python_answer(seed000_db: NavDatabase) -> None
         compared += 1
         changed += moved
     assert compared >= 40 and changed >= 3  # the checks did change some answers
+
+
+def test_compiled_recheck_gives_the_verifiers_answer(seed000_db: NavDatabase) -> None:
+    """pipeline._refine's compiled check agrees with Verifier.check: pairs, bound and attitude."""
+    config = SimConfig(mag_limit=6.5, centroid_noise_px=1.0, false_stars=3)
+    frames = simulate_frames(SEED000_CAMERA, 30, config, rng=4)
+    row_of = {int(h): i for i, h in enumerate(np.asarray(seed000_db.stars.hip))}
+    proven = refused = 0
+    for n, frame in enumerate(frames):
+        obs = _observation([(frame.centroids, SEED000_CAMERA, None)], [np.eye(3)])
+        hip = frame.hip[obs.index]
+        known = [(i, row_of[int(h)]) for i, h in enumerate(hip) if h >= 0 and int(h) in row_of][:5]
+        if len(known) < 4:
+            continue
+        o, c = (np.array(x) for x in zip(*known, strict=True))
+        if n % 3 == 0:  # a wrong hypothesis: two catalogue stars swapped
+            c[[0, 1]] = c[[1, 0]]
+        v = Verifier(seed000_db, obs, match_radius_px=3.0, max_false_prob=1.0, strong_false_prob=1.0)
+        python = v.check(o, c, n_trials=50)
+        ok, m_obs, m_cat, r, prob = recheck(obs, seed000_db, o, c, 50, 3.0)
+        assert ok == (python is not None)
+        if ok:
+            assert sorted(zip(m_obs.tolist(), m_cat.tolist())) == sorted(zip(python.obs.tolist(), python.cat.tolist()))
+            assert prob == pytest.approx(python.false_prob, rel=1e-8, abs=1e-300)
+            np.testing.assert_allclose(r, python.matrix, atol=1e-9)
+        proven += ok
+        refused += not ok
+    assert proven >= 10 and refused >= 3

@@ -285,6 +285,22 @@ def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s
                 break
         if hits == 0:
             return False, empty, empty, r, 1.0, near, near_bore
+    return verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
+                        near_chord, mount, buf, near, near_bore, mounts, cams, dist, rows, row_off, radius_px,
+                        quick_tol, trials)
+
+
+@njit(cache=True, nogil=True)
+def verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
+                 near_chord, mount, buf, near, near_bore, mounts, cams, dist, rows, row_off, radius_px, quick_tol,
+                 trials):
+    """The hypothesis "observed rows ``o`` are catalogue rows ``lab``" (any number of pairs; one
+    camera) at attitude ``r`` through :meth:`~service.core.verify.Verifier.check`'s steps after
+    its screen: pairing and refits, the near-miss test, and the coincidence bound multiplied by
+    ``trials``. Returns ``(ok, m_obs, m_cat, r, prob, near, near_bore)`` (the gathered field is
+    handed back for reuse)."""
+    empty = np.zeros(0, np.int64)
+    n_obs = len(obs_vec)
     near, near_bore = _field(r, mount, near, near_bore, near_chord, g_cell, g_side, g_keys, g_starts, g_stars,
                              star_vec, g_columns, buf)
     near_off = np.array([0, len(near)], np.int64)
@@ -313,10 +329,12 @@ def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s
         n_pairs = len(m_obs)
     n_hyp = 0
     for i in range(len(m_obs)):
-        if m_obs[i] == o[0] or m_obs[i] == o[1] or m_obs[i] == o[2] or m_obs[i] == o[3]:
-            n_hyp += 1
+        for j in range(len(o)):
+            if m_obs[i] == o[j]:
+                n_hyp += 1
+                break
     n_extra = len(m_obs) - n_hyp
-    n_free = n_obs - 4
+    n_free = n_obs - len(o)
     if len(m_obs) < 4 or n_extra < 1:
         return False, empty, empty, r, 1.0, near, near_bore
     tail = binomial_tail(n_free, n_extra, min(p_single, 1.0)) if n_free >= n_extra else 1.0

@@ -10,7 +10,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -87,9 +87,9 @@ class Centroids:
         return np.argsort(-self.flux, kind="stable").astype(np.int64)
 
 
-@dataclass(frozen=True, slots=True)
-class StarMatch:
-    """One identified star: an input centroid paired with a catalogue star."""
+class StarMatch(NamedTuple):
+    """One identified star: an input centroid paired with a catalogue star (a named tuple: an
+    answer holds dozens, built on every frame)."""
 
     centroid: int
     hip: int

@@ -76,12 +76,13 @@ class SolveOptions:
 DEFAULT_OPTIONS = SolveOptions()
 
 QUAD_REFUSE_STARS = 8
-"""A frame of at least this many stars that ``quad`` searched exhaustively (every pattern of
-its brightest stars, on every member) without a proof is refused without the fallback methods
-when ``quad`` looked at all of its stars, and gives the fallbacks only
-``EXHAUSTED_BUDGET_MS`` when it holds more (bright false detections, as branches in a real
-image, can hide the stars from the brightest ``QUERY_STARS``); measured with
-``python -m bench.profile_default`` (docs/performance.md, Fast refusals)."""
+"""A frame of this many stars up to ``QUERY_STARS`` that ``quad`` searched exhaustively (every
+pattern of its stars, on every member) without a proof is refused without the fallback methods:
+they would search the same stars. Any other frame ``quad`` searched exhaustively gives the
+fallbacks only ``EXHAUSTED_BUDGET_MS``: one of 5-7 stars may still be proven by a triangle
+(the ``sparse`` member) or a pair, and in one of more than ``QUERY_STARS`` stars bright false
+detections (branches in a real image) can hide the stars from the brightest. Measured with
+``python -m bench.profile_default`` (docs/performance.md)."""
 EXHAUSTED_BUDGET_MS = 50.0
 """Time the fallback methods get after ``quad`` searched a frame exhaustively (see
 ``QUAD_REFUSE_STARS``)."""
@@ -167,8 +168,8 @@ def solve_rig(
     search_deadline = deadline  # shortened after an exhaustive quad miss (EXHAUSTED_BUDGET_MS)
     for sigma in sigmas:
         for member, methods in plan:
-            if misses and all(misses) and len(obs) >= QUAD_REFUSE_STARS and "quad" not in methods:
-                if len(obs) <= QUERY_STARS:
+            if misses and all(misses) and "quad" not in methods:
+                if QUAD_REFUSE_STARS <= len(obs) <= QUERY_STARS:
                     continue  # fast refusal: the fallbacks would search the same stars (see QUAD_REFUSE_STARS)
                 search_deadline = min(search_deadline, time.perf_counter() + EXHAUSTED_BUDGET_MS / 1e3)
             db = member

@@ -40,25 +40,25 @@ def quat_to_matrix(q: FloatArray) -> FloatArray:
 
 def matrix_to_quat(r: FloatArray) -> FloatArray:
     """Unit quaternion ``[w, x, y, z]`` with ``w >= 0`` of a rotation matrix (Shepperd's method)."""
-    r = np.asarray(r, dtype=np.float64)
-    tr = np.trace(r)
-    cands = np.array([tr, r[0, 0], r[1, 1], r[2, 2]])
-    i = int(np.argmax(cands))
-    if i == 0:
+    # Python floats: ~5x faster than indexing the array element by element
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(r, dtype=np.float64).tolist()
+    tr = r00 + r11 + r22
+    best = max(tr, r00, r11, r22)
+    if best == tr:
         s = math.sqrt(1.0 + tr) * 2
-        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
-    elif i == 1:
-        s = math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
-        q = [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
-    elif i == 2:
-        s = math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
-        q = [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
+        q = [0.25 * s, (r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s]
+    elif best == r00:
+        s = math.sqrt(1.0 + r00 - r11 - r22) * 2
+        q = [(r21 - r12) / s, 0.25 * s, (r01 + r10) / s, (r02 + r20) / s]
+    elif best == r11:
+        s = math.sqrt(1.0 + r11 - r00 - r22) * 2
+        q = [(r02 - r20) / s, (r01 + r10) / s, 0.25 * s, (r12 + r21) / s]
     else:
-        s = math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
-        q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
-    qa = np.asarray(q)
-    qa /= np.linalg.norm(qa)
-    return -qa if qa[0] < 0 else qa
+        s = math.sqrt(1.0 + r22 - r00 - r11) * 2
+        q = [(r10 - r01) / s, (r02 + r20) / s, (r12 + r21) / s, 0.25 * s]
+    norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    sign = -1.0 if q[0] < 0 else 1.0
+    return np.array([sign * q[0] / norm, sign * q[1] / norm, sign * q[2] / norm, sign * q[3] / norm])
 
 
 def quat_multiply(a: FloatArray, b: FloatArray) -> FloatArray:

@@ -81,8 +81,10 @@ pattern of its stars, on every member) without a proof is refused without the fa
 they would search the same stars. Any other frame ``quad`` searched exhaustively gives the
 fallbacks only ``EXHAUSTED_BUDGET_MS``: one of 5-7 stars may still be proven by a triangle
 (the ``sparse`` member) or a pair, and in one of more than ``QUERY_STARS`` stars bright false
-detections (branches in a real image) can hide the stars from the brightest. Measured with
-``python -m bench.profile_default`` (docs/performance.md)."""
+detections (branches in a real image) can hide the stars from the brightest; there the first
+fallback alone runs (``maxangle`` on the default set: 3-12 ms on random points, where
+``pyramid`` takes 130-500 ms). Measured with ``python -m bench.profile_default``
+(docs/performance.md)."""
 EXHAUSTED_BUDGET_MS = 50.0
 """Time the fallback methods get after ``quad`` searched a frame exhaustively (see
 ``QUAD_REFUSE_STARS``)."""
@@ -134,18 +136,7 @@ def solve_rig(
         raise InvalidInputError("cameras", "at least one camera frame is required")
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
-    if isinstance(db, NavDatabaseSet):
-        widest = max((cam for _, cam, _ in frames), key=lambda c: c.diagonal_fov_deg)
-        fitting = db.for_camera(widest.fov_deg, widest.diagonal_fov_deg)
-        # search the shallowest fitting member first (bright stars: few, fast, robust; of equal
-        # depth the one made for the narrower range), then refine the answer against the
-        # deepest one (more stars, a better attitude)
-        members = sorted(fitting, key=lambda m: (m.mag_limit, m.max_fov_deg))
-        deepest = max(fitting, key=lambda m: (m.mag_limit, -m.max_fov_deg))
-    else:
-        members, deepest = [db], db
-    fov = max(cam.fov_deg for _, cam, _ in frames)
-    method_lists = [resolve(m, method, fov_deg=fov, sigma_px=options.centroid_sigma_px) for m in members]
+    plan, deepest = _search_plan(db, [cam for _, cam, _ in frames], method, options.centroid_sigma_px)
     refused = refusal(frames, db, method, t0)
     if refused is not None:
         return refused
@@ -163,7 +154,6 @@ def solve_rig(
         sigmas.append(options.centroid_sigma_px * options.retry_sigma_factor)
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
     # the coincidence bound is multiplied by
-    plan = _plan(members, method_lists)
     misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?
     search_deadline = deadline  # shortened after an exhaustive quad miss (EXHAUSTED_BUDGET_MS)
     for sigma in sigmas:
@@ -171,6 +161,8 @@ def solve_rig(
             if misses and all(misses) and "quad" not in methods:
                 if QUAD_REFUSE_STARS <= len(obs) <= QUERY_STARS:
                     continue  # fast refusal: the fallbacks would search the same stars (see QUAD_REFUSE_STARS)
+                if len(obs) > QUERY_STARS:
+                    methods = methods[:1]  # the first fallback alone (maxangle; see QUAD_REFUSE_STARS)
                 search_deadline = min(search_deadline, time.perf_counter() + EXHAUSTED_BUDGET_MS / 1e3)
             db = member
             found, used, trials = _identify(obs, db, methods, sigma, options, search_deadline, hint, trials, tried,
@@ -194,6 +186,39 @@ def solve_rig(
     timings["total"] = (time.perf_counter() - t0) * 1e3
     object.__setattr__(sol, "timings_ms", timings)
     return sol
+
+
+_IDENTITY = np.eye(3)
+
+PLAN_CACHE_SIZE = 256
+"""Search plans kept per opened database (one per camera geometry, method and sigma seen)."""
+
+
+def _search_plan(db: NavDatabase | NavDatabaseSet, cameras: list[Camera], method: str, sigma_px: float | None
+                 ) -> tuple[list[tuple[NavDatabase, list[str]]], NavDatabase]:
+    """The members and methods to search, in order (:func:`_plan`), and the member to refine an
+    answer against, for these cameras; kept per database, as every frame of a camera asks the
+    same (choosing them costs ~30 us a frame)."""
+    key = (method, sigma_px, tuple((c.fov_deg, c.diagonal_fov_deg) for c in cameras))
+    cache = db.__dict__.setdefault("_plans", {})
+    if key in cache:
+        return cache[key]
+    if isinstance(db, NavDatabaseSet):
+        widest = max(cameras, key=lambda c: c.diagonal_fov_deg)
+        fitting = db.for_camera(widest.fov_deg, widest.diagonal_fov_deg)
+        # search the shallowest fitting member first (bright stars: few, fast, robust; of equal
+        # depth the one made for the narrower range), then refine the answer against the
+        # deepest one (more stars, a better attitude)
+        members = sorted(fitting, key=lambda m: (m.mag_limit, m.max_fov_deg))
+        deepest = max(fitting, key=lambda m: (m.mag_limit, -m.max_fov_deg))
+    else:
+        members, deepest = [db], db
+    fov = max(cam.fov_deg for cam in cameras)
+    method_lists = [resolve(m, method, fov_deg=fov, sigma_px=sigma_px) for m in members]
+    if len(cache) >= PLAN_CACHE_SIZE:
+        cache.clear()
+    cache[key] = (_plan(members, method_lists), deepest)
+    return cache[key]
 
 
 def _plan(members: list[NavDatabase], method_lists: list[list[str]]) -> list[tuple[NavDatabase, list[str]]]:
@@ -267,6 +292,16 @@ def _identify(
 
 
 def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: list[np.ndarray]) -> Observation:
+    """The stars of every camera as body vectors, brightest first (see :class:`Observation`)."""
+    if len(frames) == 1 and len(frames[0][0]):  # one camera, every frame: no concatenation
+        cents, cam, _ = frames[0]
+        order = np.argsort(-np.asarray(cents.flux), kind="stable")
+        xy = np.asarray(cents.xy, dtype=np.float64)[order]
+        vec = cam.pixel_to_vector(xy)
+        if not np.array_equal(mountings[0], _IDENTITY):
+            vec = vec @ mountings[0]
+        return Observation(vec, xy, order.astype(np.int64), np.zeros(len(order), np.int64), (cam,),
+                           tuple(mountings), flux=np.asarray(cents.flux)[order])
     vecs, xys, idx, cams, fluxes = [], [], [], [], []
     for c, (cents, cam, _) in enumerate(frames):
         if len(cents) == 0:

@@ -104,13 +104,14 @@ def matrix_from_radec_roll(ra_deg: float, dec_deg: float, roll_deg: float) -> Fl
 
 def radec_roll(r: FloatArray) -> tuple[float, float, float]:
     """Boresight RA, Dec and roll (degrees) of an ICRS -> camera matrix. RA in [0, 360)."""
-    z = r[2]
-    up = -r[1]
-    ra = math.atan2(z[1], z[0]) % (2 * math.pi)
-    dec = math.asin(max(-1.0, min(1.0, z[2])))
-    north = np.array([-math.sin(dec) * math.cos(ra), -math.sin(dec) * math.sin(ra), math.cos(dec)])
-    east = np.array([-math.sin(ra), math.cos(ra), 0.0])
-    roll = math.degrees(math.atan2(float(up @ east), float(up @ north))) % 360.0
+    _, (u0, u1, u2), (z0, z1, z2) = np.asarray(r, dtype=np.float64).tolist()  # Python floats: ~4x faster
+    up0, up1, up2 = -u0, -u1, -u2
+    ra = math.atan2(z1, z0) % (2 * math.pi)
+    dec = math.asin(max(-1.0, min(1.0, z2)))
+    sd, cd, sr, cr = math.sin(dec), math.cos(dec), math.sin(ra), math.cos(ra)
+    up_north = -sd * cr * up0 - sd * sr * up1 + cd * up2
+    up_east = -sr * up0 + cr * up1
+    roll = math.degrees(math.atan2(up_east, up_north)) % 360.0
     return math.degrees(ra), math.degrees(dec), roll
 
 

@@ -44,14 +44,29 @@ class RigArrays:
     row_off: np.ndarray
 
 
+_CAMERA_ROWS: dict[tuple[Any, ...], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _camera_rows(cameras: tuple[Any, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """``(cams, dist)`` of :class:`RigArrays` for these cameras, kept per camera set (every
+    frame of a camera asks the same; the kernels only read them)."""
+    got = _CAMERA_ROWS.get(cameras)
+    if got is None:
+        cams = np.array([[c.f_px, c.cx, c.cy, c.width, c.height] for c in cameras], dtype=np.float64)
+        dist = np.zeros((len(cameras), 5))
+        for i, c in enumerate(cameras):
+            if c.distortion:
+                dist[i, :len(c.distortion)] = c.distortion[:5]
+        if len(_CAMERA_ROWS) >= 256:
+            _CAMERA_ROWS.clear()
+        got = _CAMERA_ROWS[cameras] = (cams, dist)
+    return got
+
+
 def rig_arrays(cameras: Sequence[Any], mountings: Sequence[np.ndarray], by_camera: Sequence[np.ndarray]) -> RigArrays:
     """Pack cameras (:class:`~service.core.camera.Camera`), their mountings and their observed
     rows for the kernels."""
-    cams = np.array([[c.f_px, c.cx, c.cy, c.width, c.height] for c in cameras], dtype=np.float64)
-    dist = np.zeros((len(cameras), 5))
-    for i, c in enumerate(cameras):
-        if c.distortion:
-            dist[i, :len(c.distortion)] = c.distortion[:5]
+    cams, dist = _camera_rows(tuple(cameras))
     if len(by_camera) == 1:  # one camera, every frame: skip the general packing (~20 us)
         rows = np.asarray(by_camera[0], np.int64)
         mount = np.array(mountings[0], dtype=np.float64).reshape(1, 3, 3)

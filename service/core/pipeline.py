@@ -112,9 +112,8 @@ def solve(
     hint : (quaternion [w, x, y, z], radius_deg), optional
         Prior attitude; answers whose boresight lies farther than ``radius_deg`` are refused.
     """
-    identity = np.eye(3)
     return solve_rig([(centroids, camera, None)], db, method=method, hint=hint, options=options,
-                     _mountings=[identity])
+                     _mountings=_ONE_CAMERA)
 
 
 def solve_rig(
@@ -189,6 +188,7 @@ def solve_rig(
 
 
 _IDENTITY = np.eye(3)
+_ONE_CAMERA = [_IDENTITY]
 
 PLAN_CACHE_SIZE = 256
 """Search plans kept per opened database (one per camera geometry, method and sigma seen)."""
@@ -298,10 +298,11 @@ def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: 
         order = np.argsort(-np.asarray(cents.flux), kind="stable")
         xy = np.asarray(cents.xy, dtype=np.float64)[order]
         vec = cam.pixel_to_vector(xy)
-        if not np.array_equal(mountings[0], _IDENTITY):
+        if mountings[0] is not _IDENTITY and not np.array_equal(mountings[0], _IDENTITY):
             vec = vec @ mountings[0]
-        return Observation(vec, xy, order.astype(np.int64), np.zeros(len(order), np.int64), (cam,),
-                           tuple(mountings), flux=np.asarray(cents.flux)[order])
+        n = len(order)
+        return Observation(vec, xy, order.astype(np.int64), np.zeros(n, np.int64), (cam,), tuple(mountings),
+                           by_camera=(np.arange(n),), flux=np.asarray(cents.flux)[order])
     vecs, xys, idx, cams, fluxes = [], [], [], [], []
     for c, (cents, cam, _) in enumerate(frames):
         if len(cents) == 0:
@@ -446,19 +447,19 @@ def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma
     ref, seen = _apparent(db, v.cat, options)
     fit = estimate(obs.vec[v.obs], seen, matrix=None if moved else v.matrix, prior_sigma_rad=sigma_rad)
     ra, dec, roll = radec_roll(fit.matrix)
-    order = np.lexsort((obs.index[v.obs], obs.camera[v.obs]))
-    ref = ref[order]
-    columns = zip(
-        obs.index[v.obs][order].tolist(),
-        db.stars.hip[v.cat][order].tolist(),
+    index, camera = obs.index[v.obs], obs.camera[v.obs]
+    order = np.argsort(index, kind="stable") if len(obs.cameras) == 1 else np.lexsort((index, camera))
+    ref, cat = ref[order], v.cat[order]
+    stars = tuple(map(  # by camera, then by centroid index; one column at a time (~2x faster than rows)
+        StarMatch,
+        index[order].tolist(),
+        db.stars.hip[cat].tolist(),
         np.degrees(np.mod(np.arctan2(ref[:, 1], ref[:, 0]), 2 * np.pi)).tolist(),
         np.degrees(np.arcsin(np.clip(ref[:, 2], -1, 1))).tolist(),
-        np.round(db.stars.mag[v.cat][order].astype(np.float64), 3).tolist(),
+        np.round(db.stars.mag[cat].astype(np.float64), 3).tolist(),
         np.round(fit.residuals_arcsec[order], 3).tolist(),
-        obs.camera[v.obs][order].tolist(),
-        strict=True,
-    )
-    stars = tuple(StarMatch(*row) for row in columns)
+        camera[order].tolist(),
+    ))
     q = fit.quaternion
     return Solution(
         SolveStatus.SOLVED,

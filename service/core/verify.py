@@ -82,7 +82,7 @@ class Observation:
         """The cameras as plain arrays for the compiled kernels (built once)."""
         return rig_arrays(self.cameras, self.mountings, self.by_camera)
 
-    @property
+    @cached_property
     def pixel_scale_rad(self) -> float:
         """Coarsest pixel scale among the cameras, radians per pixel."""
         return max(c.pixel_scale_rad for c in self.cameras)

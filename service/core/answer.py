@@ -4,8 +4,9 @@ What :func:`service.core.pipeline._solution` does to a verified identification b
 fit, for a single camera: project the catalogue stars of the field under the answer's attitude,
 name the blobs of close doubles as their dominant star (:func:`~service.core.blends.dominant_kernel`),
 and drop the pairs whose observed star is far too bright for its catalogue star
-(:func:`~service.core.photometry.too_bright_kernel`) or whose catalogue star is fainter than the
-frame's completeness (:func:`~service.core.photometry.completeness_kernel`). The same kernels as
+(:func:`~service.core.photometry.too_bright_kernel`), whose catalogue star is fainter than the
+frame's completeness (:func:`~service.core.photometry.completeness_kernel`) or that lie too far
+from their catalogue star for the frame's noise (:func:`~service.core.residuals.distant_kernel`). The same kernels as
 the Python path, without its k-d tree query and its per-camera numpy calls (rigs keep the Python
 path).
 """
@@ -22,6 +23,7 @@ from .blends import MIN_DELTA_MAG, dominant_kernel
 from .methods.quad_kernel import verify_pairs
 from .navdb.reader import NavDatabase
 from .photometry import FAINT_GATE_MAG, MIN_PAIRS, THRESHOLD_MAG, completeness_kernel, too_bright_kernel
+from .residuals import distant_kernel
 from .skygrid import SkyGrid, build_sky_grid, collect_within
 from .types import IntArray
 from .verify import NEAR_MARGIN_DEG
@@ -50,9 +52,10 @@ def star_mags(db: NavDatabase) -> np.ndarray:
 
 
 def compiled_checks(obs, db: NavDatabase, m_obs: IntArray, m_cat: IntArray, r: np.ndarray,
-                    radius_px: float) -> tuple[IntArray, IntArray, bool] | None:
+                    radius_px: float, sigma_px: float = 0.0) -> tuple[IntArray, IntArray, bool] | None:
     """The pairs of a one-camera answer after the blend and plausibility checks, and whether
-    they changed; None for a rig (several cameras: the Python path)."""
+    they changed; None for a rig (several cameras: the Python path). ``sigma_px``: the declared
+    centroid error per axis (px; 0: the frame's measured one alone)."""
     if len(obs.cameras) != 1:
         return None
     cam = obs.cameras[0]
@@ -63,7 +66,7 @@ def compiled_checks(obs, db: NavDatabase, m_obs: IntArray, m_cat: IntArray, r: n
     o, c, moved = answer_kernel(obs.xy, flux, obs.flux is not None, m_obs, m_cat, np.ascontiguousarray(r),
                                 np.ascontiguousarray(db.stars.vec, dtype=np.float64), star_mags(db),
                                 g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, chord, k.mounts[0],
-                                k.cams[0], k.dist[0], float(radius_px))
+                                k.cams[0], k.dist[0], float(radius_px), float(sigma_px))
     return o, c, moved
 
 
@@ -129,6 +132,20 @@ def field_stars(r_cam: np.ndarray, chord: float, cell: float, n_side: int, keys:
 
 
 @njit(cache=True, nogil=True)
+def pair_distances(obs_xy: np.ndarray, m_obs: np.ndarray, m_cat: np.ndarray, rows: np.ndarray,
+                   pxy: np.ndarray) -> np.ndarray:
+    """Distance (px) of each pair's observed star from its catalogue star's predicted position
+    (``rows`` and their pixels ``pxy``); NaN for a catalogue star not among ``rows``."""
+    d = np.full(len(m_obs), np.nan)
+    for i in range(len(m_obs)):
+        for j in range(len(rows)):
+            if rows[j] == m_cat[i]:
+                d[i] = math.hypot(obs_xy[m_obs[i], 0] - pxy[j, 0], obs_xy[m_obs[i], 1] - pxy[j, 1])
+                break
+    return d
+
+
+@njit(cache=True, nogil=True)
 def _member(rows: np.ndarray, of: np.ndarray) -> np.ndarray:
     out = np.zeros(len(rows), np.bool_)
     for i in range(len(rows)):
@@ -141,7 +158,7 @@ def _member(rows: np.ndarray, of: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, cell, n_side, keys, starts, stars,
-                  columns, chord, mount, cam, dist, radius_px):
+                  columns, chord, mount, cam, dist, radius_px, sigma_px):
     """``(obs rows, catalogue rows, changed)`` of an answer after the checks of
     :func:`service.core.pipeline._solution` (blends named, implausible pairs dropped)."""
     r_cam = mount @ r
@@ -165,9 +182,10 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
                 m_obs = np.concatenate((m_obs, o[:n]))
                 m_cat = np.concatenate((m_cat, cand[p[:n]]))
                 moved = True
-    # plausibility: too bright for its catalogue star, or fainter than the frame's completeness
+    # plausibility: too bright for its catalogue star, fainter than the frame's completeness, or
+    # too far from it for the frame's noise
     pair_mag = star_mag[m_cat]
-    bad = np.zeros(len(m_obs), np.bool_)
+    bad = distant_kernel(pair_distances(obs_xy, m_obs, m_cat, rows, pxy), pair_mag, sigma_px)
     if has_flux:
         bad |= too_bright_kernel(flux[m_obs], pair_mag, THRESHOLD_MAG, MIN_PAIRS)
     if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:

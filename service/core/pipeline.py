@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .answer import compiled_checks, recheck
+from .answer import compiled_checks, pair_distances, recheck
 from .apparent import aberrate, apparent_directions
 from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
 from .blends import dominant_pairs
@@ -26,6 +26,7 @@ from .methods.quad import QUERY_STARS
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .photometry import FAINT_GATE_MAG, beyond_completeness, too_bright
 from .refusal import no_solution, refusal
+from .residuals import distant_pairs
 from .types import Centroids, Solution, SolveStatus, StarMatch
 from .verify import Observation, Verified, Verifier, star_tree
 
@@ -352,11 +353,18 @@ FieldStars = list[tuple[np.ndarray, np.ndarray]]
 """Per camera: the catalogue rows predicted inside its image, and their pixel positions."""
 
 
-def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: FieldStars) -> np.ndarray:
-    """Pairs whose observed star is far brighter than its catalogue star, or whose catalogue
-    star is fainter than the frame's completeness (see :mod:`service.core.photometry`)."""
+def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: FieldStars,
+                       sigma_px: float = 0.0) -> np.ndarray:
+    """Pairs whose observed star is far brighter than its catalogue star, whose catalogue star
+    is fainter than the frame's completeness (see :mod:`service.core.photometry`), or that lie
+    too far from it for the frame's noise (:mod:`service.core.residuals`)."""
     pair_mag = np.asarray(db.stars.mag[v.cat], dtype=np.float64)
-    bad = np.zeros(len(v.obs), dtype=bool)
+    d = np.full(len(v.obs), np.nan)
+    for c, (rows, pxy) in enumerate(field):
+        mine = np.flatnonzero(obs.camera[v.obs] == c)
+        if len(mine) and len(rows):
+            d[mine] = pair_distances(obs.xy, v.obs[mine], v.cat[mine], rows, pxy)
+    bad = distant_pairs(d, pair_mag, sigma_px)
     if obs.flux is not None:
         bad |= too_bright(obs.flux[v.obs], pair_mag)
     if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
@@ -415,7 +423,8 @@ def _stars_in_field(obs: Observation, db: NavDatabase, r_body: np.ndarray) -> Fi
     return out
 
 
-def checked_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: float) -> tuple[Verified, bool]:
+def checked_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: float,
+                  sigma_px: float = 0.0) -> tuple[Verified, bool]:
     """``v`` after the checks of a proven answer, and whether its pairs changed: the blobs of
     close doubles named as their dominant star, then the implausible pairs dropped (far too
     bright for their catalogue star, or fainter than the frame's completeness). Any number of
@@ -425,7 +434,7 @@ def checked_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: flo
     blended = _blend_pairs(obs, db, v, radius_px, field)
     if blended is not None:
         v, moved = blended, True
-    implausible = _implausible_pairs(obs, db, v, field)  # also judges the blends just named
+    implausible = _implausible_pairs(obs, db, v, field, sigma_px)  # also judges the blends just named
     if implausible.any():  # false detections paired with faint catalogue stars by position alone
         v = Verified(v.obs[~implausible], v.cat[~implausible], v.matrix, v.false_prob, v.n_trials)
         moved = True
@@ -436,9 +445,10 @@ def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma
               options: SolveOptions = DEFAULT_OPTIONS) -> Solution:
     moved = options.epoch is not None or options.observer_velocity_km_s is not None
     radius = options.match_radius_px or max(2.5, 3.0 * sigma_rad / obs.pixel_scale_rad)
-    checked = compiled_checks(obs, db, v.obs, v.cat, v.matrix, radius)  # one camera: compiled
+    sigma_px = sigma_rad / obs.pixel_scale_rad
+    checked = compiled_checks(obs, db, v.obs, v.cat, v.matrix, radius, sigma_px)  # one camera: compiled
     if checked is None:
-        v, changed = checked_pairs(obs, db, v, radius)
+        v, changed = checked_pairs(obs, db, v, radius, sigma_px)
     else:
         changed = checked[2]
         if changed:

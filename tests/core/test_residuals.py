@@ -1,0 +1,89 @@
+"""Position consistency of an answer's pairs, and the wrong answers it fixed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from service.core.evaluate import score
+from service.core.pipeline import SolveOptions, solve
+from service.core.presets import PRESETS
+from service.core.residuals import GAP_MAG, Z_ANY, Z_BEYOND, Z_FAINTEST, distant_pairs
+from service.core.sim import SimConfig, simulate_frames
+
+FOUND = [
+    # (camera, noise px, false stars, mag noise, seed, frames, index): `python -m bench.bench_wrong
+    # --frames 24000` on the default database (session 5). Each time the attitude was right and one
+    # false star was named after a catalogue star: 1.9 px (7 sigma) from it inside the 2.5-px radius
+    # floor at 0.25 px, or 2.4-3.5 sigma from a star at or past the camera's limit.
+    ("seed001", 0.25, 5, 0.0, 393543455801370141, 200, 59),
+    ("seed003", 0.25, 2, 0.3, 10315727423585640373, 200, 30),
+    ("seed003", 2.0, 5, 0.0, 13318148164082012119, 200, 61),
+    ("seed003", 2.0, 5, 0.3, 2272477347409813501, 200, 191),
+]
+
+
+@pytest.mark.parametrize("case", FOUND, ids=[f"{c[0]}-{c[1]}px-{c[2]}false-{c[6]}" for c in FOUND])
+def test_found_wrong_answers_name_no_false_star(case, default_set_db) -> None:
+    camera, noise, false, mag_noise, seed, n, index = case
+    preset = PRESETS[camera]
+    config = SimConfig(mag_limit=preset.mag_limit, centroid_noise_px=noise, false_stars=false, mag_noise=mag_noise)
+    frame = simulate_frames(preset.camera, n, config, rng=seed)[index]
+    sol = solve(frame.centroids, preset.camera, default_set_db, options=SolveOptions(centroid_sigma_px=noise))
+    assert sol.solved
+    s = score(sol, frame.quaternion, frame.hip.tolist(), blends=frame.blends)
+    assert s.correct and s.wrong_stars == 0
+    assert len(sol.stars) >= 10  # the real stars stay named
+
+
+def _frame(n: int, sigma: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    d = np.hypot(*rng.normal(0, sigma, (2, n)))
+    mag = np.linspace(3.0, 6.0, n)
+    return d, mag
+
+
+def test_far_pairs_are_refused_near_ones_kept() -> None:
+    rng = np.random.default_rng(1)
+    d, mag = _frame(30, 0.25, rng)
+    d = np.minimum(d, 2.0 * 0.25)  # every real star within 2 sigma
+    assert not distant_pairs(d, mag, 0.25).any()
+    d[10] = (Z_ANY + 0.5) * 0.25  # a bright pair far off: refused whatever its magnitude
+    assert np.flatnonzero(distant_pairs(d, mag, 0.25)).tolist() == [10]
+
+
+def test_the_declared_noise_bounds_the_measured_one_from_below() -> None:
+    d, mag = np.full(20, 0.05), np.linspace(3.0, 6.0, 20)  # a frame fitting far better than declared
+    d[5] = 1.0  # 20 measured sigma, 2 declared: kept
+    assert not distant_pairs(d, mag, 0.5).any()
+    assert distant_pairs(d, mag, 0.0)[5]  # with no declared noise the measured one rules
+
+
+def test_the_faintest_pair_needs_less_and_more_so_past_the_rest() -> None:
+    mag = np.linspace(3.0, 6.0, 20)
+    d = np.full(20, 1.0)  # measured sigma = 1 / sqrt(ln 4) ~ 0.85 px; declared 1 px rules
+    d[-1] = (Z_FAINTEST + Z_BEYOND) / 2  # between the two thresholds
+    assert not distant_pairs(d, mag, 1.0).any()  # the faintest, but close to the next one
+    mag[-1] = mag[-2] + GAP_MAG + 0.05  # past every other pair
+    assert distant_pairs(d, mag, 1.0)[-1]
+    d[-1] = Z_FAINTEST + 0.2
+    mag[-1] = mag[-2] + 0.05
+    assert distant_pairs(d, mag, 1.0)[-1]
+    d[3] = Z_FAINTEST + 0.2  # the same distance on a brighter pair is kept
+    assert not distant_pairs(d, mag, 1.0)[3]
+
+
+def test_few_pairs_or_unknown_distances_are_not_judged() -> None:
+    assert not distant_pairs(np.array([0.1, 0.1, 0.1, 9.0]), np.array([3.0, 4.0, 5.0, 6.0]), 0.1).any()
+    d = np.array([0.1] * 7 + [np.nan])
+    assert not distant_pairs(d, np.linspace(3, 6, 8), 0.1).any()
+
+
+def test_real_stars_are_seldom_refused() -> None:
+    rng = np.random.default_rng(7)
+    refused = total = 0
+    for _ in range(2000):
+        d, mag = _frame(20, 1.0, rng)
+        refused += int(distant_pairs(d, mag, 1.0).sum())
+        total += len(d)
+    # the faintest of 20 beyond 2.5 sigma: exp(-3.125) / 20 ~ 0.2 % of the pairs
+    assert refused / total < 0.005

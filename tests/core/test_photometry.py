@@ -1,37 +1,12 @@
-"""Brightness and completeness checks of an answer's pairs, and the wrong answers they fixed."""
+"""Brightness and completeness checks of an answer's pairs (the wrong answers they fixed:
+tests/core/test_found_wrong.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from service.core.evaluate import score
 from service.core.photometry import beyond_completeness, too_bright
-from service.core.pipeline import SolveOptions, solve
-from service.core.presets import PRESETS
-from service.core.sim import SimConfig, simulate_frames
-
-FOUND = [
-    # (camera, noise px, false stars, mag noise, seed, frames, index): `python -m bench.bench_wrong
-    # --frames 24000` on the default database. A false star fell near a catalogue star fainter
-    # than the camera sees (the default set's deep member holds stars to 8 Mv) and was named.
-    ("seed000", 0.25, 2, 0.3, 18019190785799434842, 200, 123),
-    ("seed000", 0.25, 5, 0.0, 4463063595105581093, 200, 64),
-    ("seed000", 0.25, 5, 0.3, 14285705283403074772, 200, 72),
-    ("seed000", 1.0, 2, 0.3, 8938798499141819448, 200, 81),
-]
-
-
-@pytest.mark.parametrize("case", FOUND, ids=[f"{c[0]}-{c[1]}px-{c[2]}false-{c[6]}" for c in FOUND])
-def test_found_wrong_answers_name_no_false_star(case, default_set_db) -> None:
-    camera, noise, false, mag_noise, seed, n, index = case
-    preset = PRESETS[camera]
-    config = SimConfig(mag_limit=preset.mag_limit, centroid_noise_px=noise, false_stars=false, mag_noise=mag_noise)
-    frame = simulate_frames(preset.camera, n, config, rng=seed)[index]
-    sol = solve(frame.centroids, preset.camera, default_set_db, options=SolveOptions(centroid_sigma_px=noise))
-    assert sol.solved
-    s = score(sol, frame.quaternion, frame.hip.tolist(), blends=frame.blends)
-    assert s.correct and s.wrong_stars == 0
 
 
 def test_too_bright_flags_a_false_star_on_a_faint_catalogue_star() -> None:

@@ -4,7 +4,8 @@ What :func:`service.core.pipeline._solution` does to a verified identification b
 fit, for a single camera: project the catalogue stars of the field under the answer's attitude,
 name the blobs of close doubles as their dominant star (:func:`~service.core.blends.dominant_kernel`),
 and drop the pairs whose observed star is far too bright for its catalogue star
-(:func:`~service.core.photometry.too_bright_kernel`), whose catalogue star is fainter than the
+(:func:`~service.core.photometry.too_bright_kernel`; the faintest pair:
+:func:`~service.core.photometry.faintest_inverted_kernel`), whose catalogue star is fainter than the
 frame's completeness (:func:`~service.core.photometry.completeness_kernel`) or that lie too far
 from their catalogue star for the frame's noise (:func:`~service.core.residuals.distant_kernel`). The same kernels as
 the Python path, without its k-d tree query and its per-camera numpy calls (rigs keep the Python
@@ -22,7 +23,8 @@ from .attitude import wahba_svd
 from .blends import MIN_DELTA_MAG, dominant_kernel
 from .methods.quad_kernel import verify_pairs
 from .navdb.reader import NavDatabase
-from .photometry import FAINT_GATE_MAG, MIN_PAIRS, THRESHOLD_MAG, completeness_kernel, too_bright_kernel
+from .photometry import (FAINT_GATE_MAG, MIN_PAIRS, THRESHOLD_MAG, completeness_kernel, faintest_inverted_kernel,
+                         too_bright_kernel)
 from .residuals import distant_kernel
 from .skygrid import SkyGrid, build_sky_grid, collect_within
 from .types import IntArray
@@ -188,6 +190,7 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
     bad = distant_kernel(pair_distances(obs_xy, m_obs, m_cat, rows, pxy), pair_mag, sigma_px)
     if has_flux:
         bad |= too_bright_kernel(flux[m_obs], pair_mag, THRESHOLD_MAG, MIN_PAIRS)
+        bad |= faintest_inverted_kernel(flux[m_obs], pair_mag)
     if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
         field = np.unique(rows)
         bad |= completeness_kernel(pair_mag, star_mag[field], _member(field, m_cat))

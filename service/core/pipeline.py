@@ -24,7 +24,7 @@ from .errors import InvalidInputError
 from .methods import SolveContext, get_matcher, resolve
 from .methods.quad import QUERY_STARS
 from .navdb.reader import NavDatabase, NavDatabaseSet
-from .photometry import FAINT_GATE_MAG, beyond_completeness, too_bright
+from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted, too_bright
 from .refusal import no_solution, refusal
 from .residuals import distant_pairs
 from .types import Centroids, Solution, SolveStatus, StarMatch
@@ -366,7 +366,7 @@ def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: Fi
             d[mine] = pair_distances(obs.xy, v.obs[mine], v.cat[mine], rows, pxy)
     bad = distant_pairs(d, pair_mag, sigma_px)
     if obs.flux is not None:
-        bad |= too_bright(obs.flux[v.obs], pair_mag)
+        bad |= too_bright(obs.flux[v.obs], pair_mag) | faintest_inverted(obs.flux[v.obs], pair_mag)
     if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
         rows = np.unique(np.concatenate([r for r, _ in field])) if field else np.zeros(0, np.int64)
         bad |= beyond_completeness(pair_mag, db.stars.mag[rows], _member(rows, v.cat))

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from service.core.photometry import beyond_completeness, too_bright
+from service.core.photometry import beyond_completeness, faintest_inverted, too_bright
 
 
 def test_too_bright_flags_a_false_star_on_a_faint_catalogue_star() -> None:
@@ -46,3 +46,27 @@ def test_theil_sen_matches_scipy() -> None:
     slope, intercept = theil_sen(x, y)
     ref = theilslopes(y, x)
     assert slope == pytest.approx(ref.slope) and intercept == pytest.approx(ref.intercept)
+
+
+def test_faintest_inverted_flags_a_faint_catalogue_star_seen_bright() -> None:
+    mag = np.linspace(3.0, 6.0, 20)
+    flux = 10 ** (-0.4 * mag)  # a camera that sees each star as its magnitude says
+    assert not faintest_inverted(flux, mag).any()
+    mag_false = np.append(mag, 6.4)  # a false star of middling brightness named after a 6.4 Mv star
+    flux_false = np.append(flux, 10 ** (-0.4 * 4.5))
+    assert np.flatnonzero(faintest_inverted(flux_false, mag_false)).tolist() == [20]
+    flux_false[-1] = 10 ** (-0.4 * 6.2)  # seen as faint as it is: kept
+    assert not faintest_inverted(flux_false, mag_false).any()
+    mag_false[-1] = 6.02  # not past the next pair by FAINTEST_GAP_MAG: kept, however bright
+    flux_false[-1] = 10 ** (-0.4 * 3.5)
+    assert not faintest_inverted(flux_false, mag_false).any()
+
+
+def test_faintest_inverted_spares_real_stars_with_photometric_noise() -> None:
+    rng = np.random.default_rng(3)
+    refused = 0
+    for _ in range(2000):
+        mag = np.sort(6.0 - rng.exponential(1 / (0.45 * np.log(10)), 25))  # counts grow 10^0.45 a magnitude
+        flux = 10 ** (-0.4 * (mag + rng.normal(0, 0.2, 25)))
+        refused += int(faintest_inverted(flux, mag).any())
+    assert refused / 2000 < 0.02

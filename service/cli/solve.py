@@ -99,7 +99,10 @@ def _answer(rec: dict[str, Any], sol: Any) -> tuple[str, bool, str | None, bool 
 
     correct = None
     truth = rec.get("truth") or {}
-    if sol.solved and truth:
+    if sol.solved and truth and not rec.get("cameras"):  # one camera (most recordings)
+        blends = {int(k): v for k, v in truth["blends"].items()} if truth.get("blends") else None
+        correct = score(sol, truth.get("quaternion"), truth.get("hip"), blends=blends).correct
+    elif sol.solved and truth:
         blends = {int(k): v for k, v in (truth.get("blends") or {}).items()}
         # a rig's truth lists every camera's HIPs one camera after the other
         sizes = [len(c.get("centroids", [])) for c in rec["cameras"]] if rec.get("cameras") else [0]

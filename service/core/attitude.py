@@ -23,6 +23,13 @@ ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
 def quat_to_matrix(q: FloatArray) -> FloatArray:
     """Rotation matrix ``(3, 3)`` (or ``(..., 3, 3)``) of unit quaternion(s) ``[w, x, y, z]``."""
     q = np.asarray(q, dtype=np.float64)
+    if q.shape == (4,):  # one quaternion (every frame's answer and truth): Python floats, ~5x faster
+        w, x, y, z = q.tolist()
+        n = math.sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = w / n, x / n, y / n, z / n
+        return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     r = np.empty(q.shape[:-1] + (3, 3))

@@ -71,8 +71,28 @@ def frame_from_record(rec: Mapping[str, Any]) -> Frame:
     camera = rec.get("camera")
     if not isinstance(camera, Mapping):
         raise InvalidInputError("camera", "a camera object is required")
-    views = ((Centroids.from_list(rec.get("centroids", [])), Camera.from_spec(camera), None),)
+    views = ((Centroids.from_list(rec.get("centroids", [])), _camera(camera), None),)
     return Frame(views, rec.get("id"), truth)
+
+
+_CAMERAS: dict[tuple[Any, ...], Camera] = {}
+
+
+def _camera(spec: Mapping[str, Any]) -> Camera:
+    """``Camera.from_spec(spec)``, kept per spec: a recording repeats one camera on every line
+    (parsing and checking it again costs ~5 us a frame). A spec holding a list (distortion) is
+    not kept."""
+    try:
+        key = tuple(spec.items())
+        camera = _CAMERAS.get(key)
+    except TypeError:  # unhashable values
+        return Camera.from_spec(spec)
+    if camera is None:
+        camera = Camera.from_spec(spec)
+        if len(_CAMERAS) >= 64:
+            _CAMERAS.clear()
+        _CAMERAS[key] = camera
+    return camera
 
 
 def solve_frame(frame: Frame, db: NavDatabase | NavDatabaseSet, *, method: str = "auto",

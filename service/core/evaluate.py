@@ -57,9 +57,12 @@ def score(solution: Solution, truth_quaternion: Sequence[float] | None,
         cross, roll = attitude_error(solution.quaternion, truth_quaternion)
     wrong = 0
     if truth_hip is not None:
+        n = len(truth_hip)
         for s in solution.stars:
-            if s.camera == camera and 0 <= s.centroid < len(truth_hip):
+            if s.camera == camera and 0 <= s.centroid < n:
                 want = truth_hip[s.centroid]
+                if want is not None and s.hip == want and want >= 0:
+                    continue  # the common case, without building the set below
                 ok = {int(h) for h in (blends or {}).get(s.centroid, ())}
                 if want is not None and int(want) >= 0:
                     ok.add(int(want))

@@ -97,8 +97,9 @@ def check_method(db: NavDb, name: str) -> None:
     if name == "auto":
         return
     get_method(name)  # registered at all?
-    if name not in db.methods:
-        raise UnknownMethodError(name, ["auto", *db.methods])
+    held = db.any_methods if isinstance(db, NavDatabaseSet) else db.methods
+    if name not in held:
+        raise UnknownMethodError(name, ["auto", *held])
 
 
 def frame_call(req: SolveRequest, db: NavDb, named: Mapping[str, CameraEntry], *,

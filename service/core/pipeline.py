@@ -21,8 +21,8 @@ from .apparent import aberrate, apparent_directions
 from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
 from .blends import dominant_pairs
 from .camera import Camera
-from .errors import InvalidInputError
-from .methods import SolveContext, get_matcher, resolve
+from .errors import InvalidInputError, UnknownMethodError
+from .methods import SolveContext, get_matcher, get_method, resolve
 from .methods.quad import QUERY_STARS
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted, too_bright
@@ -224,6 +224,13 @@ def _search_plan(db: NavDatabase | NavDatabaseSet, cameras: list[Camera], method
         # deepest one (more stars, a better attitude)
         members = sorted(fitting, key=lambda m: (m.mag_limit, m.max_fov_deg))
         deepest = max(fitting, key=lambda m: (m.mag_limit, -m.max_fov_deg))
+        if method != "auto":  # a named method: the members that hold it (the set's `sparse` holds triangle)
+            holding = [m for m in members if method in m.tables]
+            if not holding:
+                get_method(method)  # an unregistered name: its own error
+                methods = sorted({name for m in members for name in m.methods})
+                raise UnknownMethodError(method, ["auto", *methods])
+            members = holding
     else:
         members, deepest = [db], db
     fov = max(cam.fov_deg for cam in cameras)

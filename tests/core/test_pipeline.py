@@ -6,7 +6,8 @@ import pytest
 from service.core.errors import InvalidInputError, UnknownMethodError
 from service.core.evaluate import score
 from service.core.methods import method_names
-from service.core.pipeline import solve
+from service.core.pipeline import SolveOptions, solve
+from service.core.presets import PRESETS
 from service.core.sim import SimConfig, random_points, simulate_frames
 from service.core.camera import Camera
 from service.core.types import Centroids
@@ -155,3 +156,18 @@ def test_no_solution_says_why_and_what_ran(seed000_db) -> None:
     good = solve(f.centroids, SEED000_CAMERA, seed000_db)
     assert good.solved and good.reason is None and good.message is None
     assert good.methods_tried[-1] == good.method and good.to_dict()["reason"] is None
+
+
+def test_a_named_method_searches_the_members_that_hold_it(default_set_db) -> None:
+    """The default set's `sparse` member alone holds `triangle`: `--method triangle` on a 4-deg
+    camera searches it; on a camera no member holding it serves, the error names what can."""
+    preset = PRESETS["seed002"]
+    config = SimConfig(mag_limit=preset.mag_limit, centroid_noise_px=0.5)
+    frames = [f for f in simulate_frames(preset.camera, 40, config, rng=3) if len(f.centroids) >= 6][:5]
+    solved = [solve(f.centroids, preset.camera, default_set_db, method="triangle",
+                    options=SolveOptions(centroid_sigma_px=0.5)) for f in frames]
+    assert all(s.method == "triangle" for s in solved) and sum(s.solved for s in solved) >= 4
+    wide = PRESETS["seed004"]
+    with pytest.raises(UnknownMethodError) as err:
+        solve(frames[0].centroids, wide.camera, default_set_db, method="triangle")
+    assert "triangle" not in err.value.known and "quad" in err.value.known

@@ -148,6 +148,12 @@ class NavDatabaseSet:
         return sorted(set.intersection(*sets)) if sets else []
 
     @property
+    def any_methods(self) -> list[str]:
+        """Methods some member holds (a named method searches the members that fit the camera
+        and hold it: the default set's ``sparse`` member alone holds ``triangle``)."""
+        return sorted({name for m in self.members.values() for name in m.methods})
+
+    @property
     def stars(self) -> StarTable:
         """The star table of the member with the most stars."""
         return max(self.members.values(), key=lambda m: len(m.stars)).stars

@@ -80,21 +80,21 @@ DEFAULT_OPTIONS = SolveOptions()
 QUAD_REFUSE_STARS = 8
 """A frame of this many stars up to ``QUERY_STARS`` that ``quad`` searched exhaustively (every
 pattern of its stars, on every member) without a proof is refused without the fallback methods:
-they would search the same stars. Any other frame ``quad`` searched exhaustively gives the
-fallbacks only ``EXHAUSTED_BUDGET_MS``: one of 5-7 stars may still be proven by a triangle
-(the ``sparse`` member) or a pair, and in one of more than ``QUERY_STARS`` stars bright false
-detections (branches in a real image) can hide the stars from the brightest; there the first
-fallback alone runs (``maxangle`` on the default set: 3-12 ms on random points, where
-``pyramid`` takes 130-500 ms). Measured with ``python -m bench.profile_default``
-(docs/performance.md)."""
+they would search the same stars. Any other frame of 5 stars or more that ``quad`` searched
+exhaustively gets the first fallback alone (``maxangle`` on the default set), for
+``FEW_STARS_BUDGET_MS`` (5-7 stars) or ``EXHAUSTED_BUDGET_MS`` (more than ``QUERY_STARS``): one
+of 5-7 stars may still be proven by a triangle and two more stars where 4 + 1 is not enough,
+and in one of more than ``QUERY_STARS`` stars bright false detections (branches in a real image)
+can hide the stars from the brightest. The later fallbacks (``pyramid``, ``triangle``) proved 2
+more frames in 9,000 of the five paper cameras (0.5-2 px, 0-2 false stars) at 17-27 ms each,
+and spent up to 64 ms on each of the 288 they could not prove; on random points ``pyramid``
+took 130-500 ms. Measured with ``python -m bench.profile_default`` (docs/performance.md)."""
 EXHAUSTED_BUDGET_MS = 50.0
-"""Time the fallback methods get after ``quad`` searched a frame of more than ``QUERY_STARS``
-stars exhaustively (see ``QUAD_REFUSE_STARS``)."""
+"""Time the first fallback gets after ``quad`` searched a frame of more than ``QUERY_STARS``
+stars exhaustively (see ``QUAD_REFUSE_STARS``; the real image tree.jpg needs most of it)."""
 FEW_STARS_BUDGET_MS = 20.0
-"""Time the fallback methods get after ``quad`` searched a frame of 5-7 stars exhaustively. Of
-9,000 frames of the five paper cameras (0.5-2 px, 0-2 false stars, 0.3 mag) the fallbacks proved
-116 such frames, 114 within 13 ms (median 1.4 ms; the other two by ``pyramid`` at 17 and 27
-ms), and spent a median 8 ms and up to 64 ms on the 288 they could not prove."""
+"""Time the first fallback gets after ``quad`` searched a frame of 5-7 stars exhaustively (it
+proves them in 1-6 ms; see ``QUAD_REFUSE_STARS``)."""
 
 
 def solve(
@@ -167,8 +167,7 @@ def solve_rig(
             if misses and all(misses) and "quad" not in methods:
                 if QUAD_REFUSE_STARS <= len(obs) <= QUERY_STARS:
                     continue  # fast refusal: the fallbacks would search the same stars (see QUAD_REFUSE_STARS)
-                if len(obs) > QUERY_STARS:
-                    methods = methods[:1]  # the first fallback alone (maxangle; see QUAD_REFUSE_STARS)
+                methods = methods[:1]  # the first fallback alone (maxangle; see QUAD_REFUSE_STARS)
                 budget = EXHAUSTED_BUDGET_MS if len(obs) > QUERY_STARS else FEW_STARS_BUDGET_MS
                 search_deadline = min(search_deadline, time.perf_counter() + budget / 1e3)
             db = member

@@ -150,8 +150,9 @@ def _fit_stats(obs: np.ndarray, ref: np.ndarray, r: np.ndarray,
         # takes 3 degrees of freedom, so E[sum |res|^2] = (2n - 3) sigma^2
         sig = max(math.sqrt(ss / max(2 * n - 3, 1)) / ARCSEC_PER_RAD, 1e-7) if n else 1e-7
     sd = np.full(3, np.inf)
-    if abs(np.linalg.det(info)) > 1e-12:
-        cov = np.linalg.inv(info) * sig * sig
+    det = _det3(info)
+    if abs(det) > 1e-12:
+        cov = inv3(info, det) * sig * sig
         for a in range(3):
             sd[a] = math.sqrt(max(cov[a, a], 0.0)) * ARCSEC_PER_RAD
     return res, rms, sd
@@ -175,14 +176,81 @@ def wahba_svd(obs: FloatArray, ref: FloatArray, weights: FloatArray | None = Non
     return wahba_kernel(obs, ref, w)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _det3(m: np.ndarray) -> float:
+    return (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+            + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
+
+
+@njit(cache=True, nogil=True)
+def inv3(m: np.ndarray, det: float) -> np.ndarray:
+    """Inverse of a 3x3 matrix of determinant ``det`` (non-zero) by cofactors (LAPACK's call
+    costs ~1 us; this ~20 ns)."""
+    out = np.empty((3, 3))
+    out[0, 0] = (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) / det
+    out[0, 1] = (m[0, 2] * m[2, 1] - m[0, 1] * m[2, 2]) / det
+    out[0, 2] = (m[0, 1] * m[1, 2] - m[0, 2] * m[1, 1]) / det
+    out[1, 0] = (m[1, 2] * m[2, 0] - m[1, 0] * m[2, 2]) / det
+    out[1, 1] = (m[0, 0] * m[2, 2] - m[0, 2] * m[2, 0]) / det
+    out[1, 2] = (m[0, 2] * m[1, 0] - m[0, 0] * m[1, 2]) / det
+    out[2, 0] = (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]) / det
+    out[2, 1] = (m[0, 1] * m[2, 0] - m[0, 0] * m[2, 1]) / det
+    out[2, 2] = (m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]) / det
+    return out
+
+
+POLAR_MAX_ITER = 40
+
+
+@njit(cache=True, nogil=True)
+def _polar_rotation(b: np.ndarray) -> tuple[bool, np.ndarray]:
+    """The orthogonal factor of ``b = Q H`` by Higham's scaled Newton iteration
+    (``X <- (g X + X^-T / g) / 2``), if ``det(b) > 0`` and it converges: then ``Q`` is the
+    rotation nearest ``b`` (Wahba's answer) without an SVD. ``(False, b)`` otherwise."""
+    scale = 0.0
+    for a in range(3):
+        for c in range(3):
+            scale = max(scale, abs(b[a, c]))
+    if scale == 0.0:
+        return False, b
+    x = b / scale
+    det = _det3(x)
+    if not det > 1e-9:  # a reflection or (nearly) rank-deficient: the SVD decides
+        return False, b
+    for _ in range(POLAR_MAX_ITER):
+        xi = inv3(x, det)
+        nx = 0.0
+        ni = 0.0
+        for a in range(3):
+            for c in range(3):
+                nx += x[a, c] * x[a, c]
+                ni += xi[a, c] * xi[a, c]
+        g = math.sqrt(math.sqrt(ni / nx))
+        change = 0.0
+        y = np.empty((3, 3))
+        for a in range(3):
+            for c in range(3):
+                y[a, c] = 0.5 * (g * x[a, c] + xi[c, a] / g)
+                change += (y[a, c] - x[a, c]) ** 2
+        x = y
+        det = _det3(x)
+        if change < 1e-30:
+            return True, x
+    return False, b
+
+
 @njit(cache=True, nogil=True)
 def wahba_kernel(obs: np.ndarray, ref: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Compiled body of :func:`wahba_svd` (a 3x3 SVD costs ~1 us here, ~10 us via numpy)."""
+    """Compiled body of :func:`wahba_svd`: the polar factor of ``B`` by Newton's iteration
+    (~0.2 us), the 3x3 SVD (~3 us in a kernel, ~10 us via numpy) when ``det(B) <= 0``."""
     b = np.zeros((3, 3))
     for i in range(len(obs)):
         for a in range(3):
             for c in range(3):
                 b[a, c] += w[i] * obs[i, a] * ref[i, c]
+    ok, q = _polar_rotation(b)
+    if ok:
+        return q
     u, _, vt = np.linalg.svd(b)
     r = u @ vt
     if np.linalg.det(r) < 0:  # a reflection: flip the least significant axis

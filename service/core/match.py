@@ -115,6 +115,10 @@ def refine(obs_vec: FloatArray, obs_xy: FloatArray, star_vec: FloatArray, hyp_ob
 
 
 
+MAX_BUCKETS = 2048
+"""Most x buckets the pairing sorts a camera's predictions into."""
+
+
 @njit(cache=True, nogil=True)
 def _project_and_pair(cam_vec: np.ndarray, f: float, cx: float, cy: float, w: int, h: int, dist: np.ndarray,
                       obs_xy: np.ndarray, radius: float, crowd: float) -> tuple[np.ndarray, np.ndarray, int]:
@@ -143,18 +147,41 @@ def _project_and_pair(cam_vec: np.ndarray, f: float, cx: float, cy: float, w: in
         n_in += 1
     n_obs = len(obs_xy)
     rad2 = radius * radius
-    crowd2 = crowd * crowd * rad2
+    reach = crowd * radius
+    crowd2 = reach * reach
+    # the predictions bucketed by x (counting sort, buckets at least `reach` wide): each observed
+    # star looks at the few predictions of the buckets its reach spans, not at all of them
+    width = max(reach, (w + 1.0) / MAX_BUCKETS)
+    n_b = int((w + 1.0) / width) + 1
+    start = np.zeros(n_b + 1, np.int64)
+    bucket = np.empty(n_in, np.int64)
+    for j in range(n_in):
+        b = min(int((pxy[j, 0] + 0.5) / width), n_b - 1)
+        bucket[j] = b
+        start[b + 1] += 1
+    for b in range(n_b):
+        start[b + 1] += start[b]
+    fill = start[:n_b].copy()
+    by_x = np.empty(n_in, np.int64)
+    for j in range(n_in):
+        by_x[fill[bucket[j]]] = j
+        fill[bucket[j]] += 1
     row_cnt = np.zeros(n_obs, np.int64)
     col_cnt = np.zeros(n_in, np.int64)
     row_last = np.full(n_obs, -1, np.int64)
     for i in range(n_obs):
-        for j in range(n_in):
-            dx = obs_xy[i, 0] - pxy[j, 0]
-            dy = obs_xy[i, 1] - pxy[j, 1]
-            if dx * dx + dy * dy <= crowd2:
-                row_cnt[i] += 1
-                col_cnt[j] += 1
-                row_last[i] = j
+        x0 = obs_xy[i, 0] + 0.5
+        b0 = max(int(math.floor((x0 - reach) / width)), 0)
+        b1 = min(int(math.floor((x0 + reach) / width)), n_b - 1)
+        for b in range(b0, b1 + 1):
+            for k in range(start[b], start[b + 1]):
+                j = by_x[k]
+                dx = obs_xy[i, 0] - pxy[j, 0]
+                dy = obs_xy[i, 1] - pxy[j, 1]
+                if dx * dx + dy * dy <= crowd2:
+                    row_cnt[i] += 1
+                    col_cnt[j] += 1
+                    row_last[i] = j
     out_obs = np.empty(n_obs, np.int64)
     out_pred = np.empty(n_obs, np.int64)
     n_out = 0

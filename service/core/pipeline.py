@@ -15,13 +15,15 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 
-from .answer import compiled_checks, pair_distances, recheck
+from .answer import compiled_checks, pair_distances, recheck, star_mags
 from .apparent import aberrate, apparent_directions
-from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
+from .attitude import ARCSEC_PER_RAD, estimate, matrix_to_quat, quat_to_matrix, radec_roll
 from .blends import dominant_pairs
 from .camera import Camera
 from .errors import InvalidInputError, UnknownMethodError
+from .first_pass import first_pass
 from .methods import SolveContext, get_matcher, get_method, resolve
 from .methods.quad import QUERY_STARS
 from .navdb.reader import NavDatabase, NavDatabaseSet
@@ -96,6 +98,10 @@ FEW_STARS_BUDGET_MS = 20.0
 """Time the first fallback gets after ``quad`` searched a frame of 5-7 stars exhaustively (it
 proves them in 1-6 ms; see ``QUAD_REFUSE_STARS``)."""
 
+COMPILED_FIRST_PASS = True
+"""Run ``auto``'s first pass as one compiled call (:mod:`service.core.first_pass`); False takes
+the same steps through the general path (four compiled calls; the tests compare the two)."""
+
 
 def solve(
     centroids: Centroids,
@@ -158,6 +164,22 @@ def solve_rig(
     sigmas = [options.centroid_sigma_px]
     if options.retry_sigma_factor > 1:
         sigmas.append(options.centroid_sigma_px * options.retry_sigma_factor)
+    if (COMPILED_FIRST_PASS and hint is None and options.epoch is None and options.observer_velocity_km_s is None and len(obs.cameras) == 1
+            and len(obs) >= 5 and plan and plan[0][1][:1] == ["quad"]):
+        # auto's first pass in one compiled call (service.core.first_pass); a frame it does not
+        # prove goes on below with the search's result in hand (QuadMatcher takes it up)
+        fp = first_pass(obs, plan[0][0], deepest, sigmas[0], options.match_radius_px, options.max_false_prob)
+        if fp.solved:
+            t2 = time.perf_counter()
+            timings["identify"] = (t2 - t1) * 1e3
+            sol = _answer(obs, fp.db, fp.obs_rows, fp.cat_rows, np.asarray(fp.db.stars.vec[fp.cat_rows]), fp.matrix,
+                          fp.residuals_arcsec, fp.rms_arcsec, fp.sigma_arcsec, fp.false_prob, "quad")
+            object.__setattr__(sol, "methods_tried", ("quad",))
+            timings["attitude"] = (time.perf_counter() - t2) * 1e3
+            timings["total"] = (time.perf_counter() - t0) * 1e3
+            object.__setattr__(sol, "timings_ms", timings)
+            return sol
+        obs.__dict__["_quad_prefetch"] = (plan[0][0], fp.search)
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
     # the coincidence bound is multiplied by
     misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?
@@ -201,6 +223,36 @@ _star_match = functools.partial(tuple.__new__, StarMatch)
 ``_make`` does; ~3x cheaper, and an answer builds dozens)."""
 
 _ONE_CAMERA = [_IDENTITY]
+
+
+def _zeros_list(n: int, _zeros: list[int] = [0] * 256) -> list[int]:  # noqa: B006 (read only)
+    return _zeros[:n] if n <= len(_zeros) else [0] * n
+
+
+def _hips(db: NavDatabase) -> np.ndarray:
+    """The star table's HIP numbers in memory (once per opened database; indexing the
+    memory map costs more)."""
+    cache = db.__dict__.setdefault("_cache", {})
+    if "hip" not in cache:
+        cache["hip"] = np.array(db.stars.hip)
+    return cache["hip"]
+
+
+@njit(cache=True, nogil=True)
+def _star_columns(ref: np.ndarray, order: np.ndarray, mag: np.ndarray, cat: np.ndarray,
+                  residuals_arcsec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """RA and Dec (deg) of the catalogue directions ``ref[order]``, the stars' magnitudes and
+    the residuals (arcsec, ``residuals_arcsec[order]``), rounded as the answer reports them."""
+    n = len(order)
+    ra = np.empty(n)
+    dec = np.empty(n)
+    res = np.empty(n)
+    for i in range(n):
+        v = ref[order[i]]
+        ra[i] = math.degrees(math.atan2(v[1], v[0]) % (2 * math.pi))
+        dec[i] = math.degrees(math.asin(min(max(v[2], -1.0), 1.0)))
+        res[i] = residuals_arcsec[order[i]]
+    return ra, dec, np.round(mag[cat], 3), np.round(res, 3)
 
 PLAN_CACHE_SIZE = 256
 """Search plans kept per opened database (one per camera geometry, method and sigma seen)."""
@@ -476,20 +528,30 @@ def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma
     moved = moved or changed
     ref, seen = _apparent(db, v.cat, options)
     fit = estimate(obs.vec[v.obs], seen, matrix=None if moved else v.matrix, prior_sigma_rad=sigma_rad)
-    ra, dec, roll = radec_roll(fit.matrix)
-    index, camera = obs.index[v.obs], obs.camera[v.obs]
-    order = index.argsort(kind="stable") if len(obs.cameras) == 1 else np.lexsort((index, camera))
-    ref, cat = ref[order], v.cat[order]
+    return _answer(obs, db, v.obs, v.cat, ref, fit.matrix, fit.residuals_arcsec, fit.rms_arcsec, fit.sigma_arcsec,
+                   v.false_prob, method)
+
+
+def _answer(obs: Observation, db: NavDatabase, obs_rows: np.ndarray, cat_rows: np.ndarray, ref: np.ndarray,
+            matrix: np.ndarray, residuals_arcsec: np.ndarray, rms_arcsec: float,
+            sigma_arcsec: tuple[float, float, float], false_prob: float, method: str) -> Solution:
+    """The :class:`Solution` of pairs ``obs_rows`` -> ``cat_rows`` (of ``db``) fitted as
+    ``matrix`` (ICRS -> body); ``ref`` the catalogue directions reported per star."""
+    ra, dec, roll = radec_roll(matrix)
+    index = obs.index[obs_rows]
+    if len(obs.cameras) == 1:
+        order = index.argsort(kind="stable")
+        camera = _zeros_list(len(order))
+    else:
+        cam_rows = obs.camera[obs_rows]
+        order = np.lexsort((index, cam_rows))
+        camera = cam_rows[order].tolist()
+    cat = cat_rows[order]
+    star_ra, star_dec, star_mag, star_res = _star_columns(ref, order, star_mags(db), cat, residuals_arcsec)
     stars = tuple(map(_star_match, zip(  # by camera, then by centroid index; column-wise (~2x faster)
-        index[order].tolist(),
-        db.stars.hip[cat].tolist(),
-        np.degrees(np.mod(np.arctan2(ref[:, 1], ref[:, 0]), 2 * np.pi)).tolist(),
-        np.degrees(np.arcsin(ref[:, 2].clip(-1, 1))).tolist(),
-        db.stars.mag[cat].astype(np.float64).round(3).tolist(),
-        fit.residuals_arcsec[order].round(3).tolist(),
-        camera[order].tolist(),
-    )))
-    q = fit.quaternion
+        index[order].tolist(), _hips(db)[cat].tolist(), star_ra.tolist(), star_dec.tolist(), star_mag.tolist(),
+        star_res.tolist(), camera)))
+    q = matrix_to_quat(matrix)
     return Solution(
         SolveStatus.SOLVED,
         method,
@@ -498,9 +560,9 @@ def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma
         dec_deg=dec,
         roll_deg=roll,
         stars=stars,
-        rms_arcsec=fit.rms_arcsec,
-        false_match_probability=v.false_prob,
-        attitude_sigma_arcsec=fit.sigma_arcsec,
+        rms_arcsec=rms_arcsec,
+        false_match_probability=false_prob,
+        attitude_sigma_arcsec=sigma_arcsec,
     )
 
 

@@ -129,3 +129,43 @@ def test_reported_sigma_predicts_the_error(prior: bool) -> None:
         ratios.append(err / np.asarray(fit.sigma_arcsec))
     std = np.std(ratios, axis=0)
     assert np.all((std > 0.9) & (std < 1.1)), std
+
+
+def _svd_rotation(b: np.ndarray) -> np.ndarray:
+    u, _, vt = np.linalg.svd(b)
+    if np.linalg.det(u @ vt) < 0:
+        u[:, 2] = -u[:, 2]
+    return u @ vt
+
+
+@pytest.mark.parametrize("cone_rad", [0.01, 0.05, 0.2, 0.6])
+def test_wahba_by_polar_iteration_equals_the_svd(rng: np.random.Generator, cone_rad: float) -> None:
+    # star-camera fields (a narrow cone of vectors: B is ill-conditioned), 3-40 pairs, noise
+    from service.core.attitude import _polar_rotation, wahba_kernel
+
+    for _ in range(300):
+        n = int(rng.integers(3, 40))
+        v = np.column_stack([rng.normal(0, cone_rad, (n, 2)), np.ones(n)])
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        r_true = quat_to_matrix(rng.normal(size=4) / 2)
+        obs = v + rng.normal(0, 2e-5, v.shape)
+        obs /= np.linalg.norm(obs, axis=1, keepdims=True)
+        ref = v @ r_true  # R^T v: obs = R ref
+        r = wahba_kernel(obs, ref, np.ones(n))
+        # answered by the iteration, not the fallback (a 1-deg field's B, det ~1e-9 scaled, may fall back)
+        assert _polar_rotation(obs.T @ ref)[0] or cone_rad < 0.05
+        np.testing.assert_allclose(r, _svd_rotation(obs.T @ ref), atol=1e-10)
+        assert np.linalg.det(r) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_wahba_of_a_reflection_or_two_pairs_falls_back_to_the_svd(rng: np.random.Generator) -> None:
+    from service.core.attitude import wahba_kernel
+
+    v = rng.normal(size=(6, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    mirrored = v * np.array([1.0, 1.0, -1.0])  # det(B) < 0: no rotation maps one onto the other
+    r = wahba_kernel(mirrored, v, np.ones(6))
+    np.testing.assert_allclose(r, _svd_rotation(mirrored.T @ v), atol=1e-12)
+    assert np.linalg.det(r) == pytest.approx(1.0)
+    two = wahba_kernel(v[:2], v[:2], np.ones(2))  # rank 2: the SVD's proper rotation (identity)
+    np.testing.assert_allclose(two, np.eye(3), atol=1e-9)

@@ -87,7 +87,11 @@ class QuadMatcher:
         obs = ctx.obs
         if len(obs.cameras) != 1 or len(obs) < 5:
             return None
-        res = self.search(obs, v, ctx.tol_rad)
+        pre = obs.__dict__.pop("_quad_prefetch", None)  # the first pass's own search (service.core.first_pass)
+        if pre is not None and pre[0] is self.db and v.trials == 0:
+            res = pre[1]
+        else:
+            res = self.search(obs, v, ctx.tol_rad)
         status, hyp_obs, hyp_cat, m_obs, m_cat, r, prob, trials, n_pat, exhausted = res[:10]
         v.trials = int(trials)
         v.patterns += int(n_pat)

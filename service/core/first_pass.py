@@ -1,0 +1,229 @@
+"""``auto``'s first pass as one compiled call: body vectors in, the fitted attitude out.
+
+For a frame of one camera whose search plan starts with ``quad``, the steps that
+:func:`service.core.pipeline.solve_rig` otherwise takes through four compiled calls and the
+Python between them run in one (:func:`first_pass_kernel`):
+
+1. the ``quad`` search on the plan's first member (:func:`~.methods.quad_kernel.quad_search`:
+   patterns, lookup, screen, pairing, near-miss test, coincidence bound);
+2. when the plan's deepest member is another one, the answer re-verified against its deeper
+   star table (what ``pipeline._refine`` does with :func:`~.answer.recheck`);
+3. the answer's checks: close doubles named, implausible pairs dropped
+   (:func:`~.answer.answer_kernel`);
+4. the final fit: Wahba refit if the pairs changed, residuals, RMS and the pooled 1-sigma
+   (:func:`~.attitude.estimate`).
+
+Python converts the input (:func:`~service.core.pipeline._observation`) and builds the answer.
+The journey is one-way: a frame ``quad`` does not prove strongly comes back with the search's
+own result, which the usual path takes up without searching again (``prefetch``), so nothing
+is done twice. Every answer is the one the four-call path gives; ``tests/core/test_first_pass.py``
+compares them frame by frame.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from .answer import FIELD_MARGIN_DEG, answer_kernel, field_grid, star_mags
+from .attitude import ARCSEC_PER_RAD, PRIOR_DOF, _fit_stats, wahba_kernel
+from .methods import get_matcher
+from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
+from .methods.quad_kernel import STATUS_FOUND, quad_search, verify_pairs
+from .navdb.reader import NavDatabase
+from .verify import NEAR_MARGIN_DEG, Observation, Verifier
+
+
+@dataclass(frozen=True)
+class Deeper:
+    """The deeper member's arrays for step 2 (built once per pair of members).
+
+    Attributes
+    ----------
+    rows : (S,) int64
+        The deeper member's row of each star of the searched member (-1: not there).
+    star_vec : (D, 3) float64
+        The deeper member's star vectors (ICRS).
+    grid : tuple
+        Its field grid (:func:`~.answer.field_grid`) as the kernels take it.
+    """
+
+    rows: np.ndarray
+    star_vec: np.ndarray
+    grid: tuple[Any, ...]
+
+
+def deeper_arrays(shallow: NavDatabase, deep: NavDatabase) -> Deeper:
+    """:class:`Deeper` for re-verifying answers of ``shallow`` against ``deep`` (cached on
+    ``shallow``)."""
+    cache = shallow.__dict__.setdefault("_deeper", {})
+    key = id(deep)
+    got = cache.get(key)
+    if got is None or got[0] is not deep:
+        hip_s = np.asarray(shallow.stars.hip)
+        hip_d = np.asarray(deep.stars.hip)
+        order = np.argsort(hip_d, kind="stable")
+        pos = np.minimum(np.searchsorted(hip_d[order], hip_s), len(hip_d) - 1)
+        rows = order[pos]
+        rows = np.where(hip_d[rows] == hip_s, rows, -1).astype(np.int64)
+        g = field_grid(deep)
+        got = cache[key] = (deep, Deeper(rows, _star_vec(deep), (g.cell, g.n_side, g.keys, g.starts, g.stars,
+                                                                     g.columns)))
+    return got[1]
+
+
+def _star_vec(db: NavDatabase) -> np.ndarray:
+    """The star vectors as contiguous float64 (once per opened database)."""
+    cache = db.__dict__.setdefault("_cache", {})
+    if "vec64" not in cache:
+        cache["vec64"] = np.ascontiguousarray(db.stars.vec, dtype=np.float64)
+    return cache["vec64"]
+
+
+@dataclass(frozen=True)
+class FirstPass:
+    """What :func:`first_pass` found.
+
+    ``search`` is the ``quad`` search's own result (see :func:`~.methods.quad_kernel.quad_search`);
+    when ``solved`` the other fields hold the answer: observed and catalogue rows (of ``db``),
+    the ICRS -> camera matrix, the false-match bound, and the fit's residuals (arcsec, per pair),
+    RMS (arcsec) and 1-sigma about x, y, z (arcsec).
+    """
+
+    search: tuple[Any, ...]
+    solved: bool
+    db: NavDatabase
+    obs_rows: np.ndarray
+    cat_rows: np.ndarray
+    matrix: np.ndarray
+    false_prob: float
+    residuals_arcsec: np.ndarray
+    rms_arcsec: float
+    sigma_arcsec: tuple[float, float, float]
+    trials: int
+
+
+def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigma_px: float,
+               match_radius_px: float | None, max_false_prob: float) -> FirstPass:
+    """``auto``'s first pass on a one-camera observation: ``quad`` on ``member``, the answer
+    re-verified against ``deepest`` (if another member), checked and fitted, in one compiled
+    call. ``sigma_px``: the declared centroid error (px, per axis)."""
+    k = obs.kernel_arrays
+    static = _static_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob)
+    flux = obs.flux if obs.flux is not None else _NO_FLUX
+    out = first_pass_kernel(obs.vec, obs.xy, flux, obs.flux is not None, k.mounts, k.cams, k.dist, k.rows,
+                            k.row_off, *static)
+    search, solved, used_deep, m_obs, m_cat, r, prob, res, rms, sd = out
+    return FirstPass(search, bool(solved), deepest if used_deep else member, m_obs, m_cat, r, float(prob), res,
+                     float(rms), (float(sd[0]), float(sd[1]), float(sd[2])), int(search[7]))
+
+
+STATIC_CACHE_SIZE = 64
+
+
+def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: float,
+                 match_radius_px: float | None, max_false_prob: float) -> tuple[Any, ...]:
+    """The kernel's arguments that depend only on the databases, the camera and the options,
+    kept per member (every frame of a camera passes the same; building them costs ~5 us)."""
+    scale = cam.pixel_scale_rad
+    key = (id(deepest), cam.diagonal_fov_deg, scale, sigma_px, match_radius_px, max_false_prob)
+    cache = member.__dict__.setdefault("_first_pass_args", {})
+    got = cache.get(key)
+    if got is not None and got[0] is deepest:
+        return got[1]
+    qm: QuadMatcher = get_matcher(member, "quad")
+    radius = match_radius_px or max(2.5, 3.0 * sigma_px)
+    tol = (3.0 * math.sqrt(2.0) * sigma_px + 0.5) * scale
+    sigma_rad = sigma_px * scale
+    answer_radius = match_radius_px or max(2.5, 3.0 * sigma_rad / scale)  # as pipeline._solution has it
+    near_chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG) / 2)
+    field_chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + FIELD_MARGIN_DEG) / 2)
+    has_deep = deepest is not member
+    deep = deeper_arrays(member, deepest) if has_deep else _NO_DEEPER
+    g = field_grid(member)
+    strong = min(max_false_prob, Verifier.strong_false_prob)
+    static = (QUERY_STARS, tol, qm.patterns, qm.table, qm.ratio_bin, qm.edge_bin, qm.edge_max, qm.star_vec,
+              *qm.screen, *qm.field, near_chord, float(radius), float(scale), float(max_false_prob),
+              float(Verifier.strong_false_prob), int(Verifier.confirm_patterns), int(Verifier.screen_stars),
+              MAX_PROBES, MAX_CHECKS, has_deep, deep.rows, deep.star_vec, *deep.grid, float(strong),
+              g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, star_mags(member), star_mags(deepest),
+              field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF)
+    if len(cache) >= STATIC_CACHE_SIZE:
+        cache.clear()
+    cache[key] = (deepest, static)
+    return static
+
+
+_NO_FLUX = np.zeros(0)
+_NO_DEEPER = Deeper(np.zeros(0, np.int64), np.zeros((0, 3)),
+                    (1.0, 1, np.zeros(1, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int64),
+                     np.zeros(1, np.int64)))
+
+
+@njit(cache=True, nogil=True)
+def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, n_use, tol, patterns, table,
+                      ratio_bin, edge_bin, edge_max, star_vec, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
+                      g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, radius_px, pixel_scale, max_false_prob, strong_false_prob,
+                      confirm_patterns, screen_stars, max_probes, max_checks,
+                      has_deep, deep_rows, d_vec, d_cell, d_side, d_keys, d_starts, d_stars, d_columns, strong,
+                      a_cell, a_side, a_keys, a_starts, a_stars, a_columns, mag, d_mag, field_chord,
+                      answer_radius, sigma_px, sigma_rad, prior_dof):
+    """The first pass (see the module's docstring). Returns ``(search, solved, used_deep,
+    obs_rows, cat_rows, matrix, false_prob, residuals_arcsec, rms_arcsec, sigma_arcsec)``."""
+    search = quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bin, edge_max, star_vec,
+                         s_cell, s_side, s_keys, s_starts, s_stars, s_columns, g_cell, g_side, g_keys, g_starts,
+                         g_stars, g_columns, near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale,
+                         max_false_prob, strong_false_prob, confirm_patterns, screen_stars, 0, max_probes,
+                         max_checks)
+    m_obs, m_cat, r, prob, trials = search[3], search[4], search[5], search[6], search[7]
+    if search[0] != STATUS_FOUND:
+        return search, False, False, m_obs, m_cat, r, 1.0, np.zeros(0), 0.0, np.zeros(3)
+    used_deep = False
+    vec, cell, side, keys, starts, stars, columns, mags = star_vec, a_cell, a_side, a_keys, a_starts, a_stars, \
+        a_columns, mag
+    if has_deep:  # pipeline._refine: the stars the deeper member holds are the hypothesis
+        n_known = 0
+        for c in m_cat:
+            if deep_rows[c] >= 0:
+                n_known += 1
+        if n_known >= 3:
+            k_obs = np.empty(n_known, np.int64)
+            k_cat = np.empty(n_known, np.int64)
+            j = 0
+            for i in range(len(m_cat)):
+                if deep_rows[m_cat[i]] >= 0:
+                    k_obs[j] = m_obs[i]
+                    k_cat[j] = deep_rows[m_cat[i]]
+                    j += 1
+            r0 = wahba_kernel(obs_vec[k_obs], d_vec[k_cat], np.ones(n_known))
+            ok, d_obs, d_cat, d_r, d_prob, _, _ = verify_pairs(
+                obs_vec, obs_xy, d_vec, k_obs, k_cat, r0, d_cell, d_side, d_keys, d_starts, d_stars, d_columns,
+                near_chord, mounts[0], np.empty(len(d_vec), np.int64), np.zeros(0, np.int64), np.zeros(3), mounts,
+                cams, dist, rows, row_off, radius_px, 1.5 * radius_px * pixel_scale, trials)
+            if ok and d_prob <= strong and len(d_obs) > len(m_obs):
+                m_obs, m_cat, r, prob, used_deep = d_obs, d_cat, d_r, d_prob, True
+                vec, cell, side, keys, starts, stars, columns, mags = d_vec, d_cell, d_side, d_keys, d_starts, \
+                    d_stars, d_columns, d_mag
+    m_obs, m_cat, moved = answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, vec, mags, cell, side, keys, starts,
+                                        stars, columns, field_chord, mounts[0], cams[0], dist[0], answer_radius,
+                                        sigma_px)
+    o = obs_vec[m_obs]
+    ref = vec[m_cat]
+    if moved:
+        r = wahba_kernel(o, ref, np.ones(len(m_obs)))
+    res, rms, sd = _fit_stats(o, ref, r, -1.0)
+    n = len(res)
+    if prior_dof > 0 and n:  # attitude.estimate's pooled sigma
+        ss = 0.0
+        for x in res:
+            ss += x * x
+        ss /= ARCSEC_PER_RAD * ARCSEC_PER_RAD
+        dof = max(2 * n - 3, 1)
+        from_residuals = max(math.sqrt(ss / dof), 1e-7)
+        pooled = math.sqrt((ss + prior_dof * sigma_rad * sigma_rad) / (dof + prior_dof))
+        sd = sd * (pooled / from_residuals)
+    return search, True, used_deep, m_obs, m_cat, r, prob, res, rms, sd

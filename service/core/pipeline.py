@@ -7,7 +7,6 @@ Every stage is timed into ``Solution.timings_ms``: ``vectors`` (camera model), `
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from collections.abc import Sequence
@@ -15,11 +14,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 
-from .answer import compiled_checks, pair_distances, recheck, star_mags
+from .answer import compiled_checks, pair_distances, recheck
 from .apparent import aberrate, apparent_directions
-from .attitude import ARCSEC_PER_RAD, estimate, matrix_to_quat, quat_to_matrix, radec_roll
+from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
 from .blends import dominant_pairs
 from .camera import Camera
 from .errors import InvalidInputError, UnknownMethodError
@@ -30,7 +28,8 @@ from .navdb.reader import NavDatabase, NavDatabaseSet
 from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted, too_bright
 from .refusal import no_solution, refusal
 from .residuals import distant_pairs
-from .types import Centroids, Solution, SolveStatus, StarMatch
+from .solution import answer
+from .types import Centroids, Solution, SolveStatus
 from .verify import Observation, Verified, Verifier, star_tree
 
 Quaternion = Sequence[float]
@@ -172,7 +171,7 @@ def solve_rig(
         if fp.solved:
             t2 = time.perf_counter()
             timings["identify"] = (t2 - t1) * 1e3
-            sol = _answer(obs, fp.db, fp.obs_rows, fp.cat_rows, np.asarray(fp.db.stars.vec[fp.cat_rows]), fp.matrix,
+            sol = answer(obs, fp.db, fp.obs_rows, fp.cat_rows, np.asarray(fp.db.stars.vec[fp.cat_rows]), fp.matrix,
                           fp.residuals_arcsec, fp.rms_arcsec, fp.sigma_arcsec, fp.false_prob, "quad")
             object.__setattr__(sol, "methods_tried", ("quad",))
             timings["attitude"] = (time.perf_counter() - t2) * 1e3
@@ -218,41 +217,8 @@ def solve_rig(
 
 _IDENTITY = np.eye(3)
 
-_star_match = functools.partial(tuple.__new__, StarMatch)
-"""``StarMatch`` of a row tuple without the named tuple's Python-level ``__new__`` (what its
-``_make`` does; ~3x cheaper, and an answer builds dozens)."""
-
 _ONE_CAMERA = [_IDENTITY]
 
-
-def _zeros_list(n: int, _zeros: list[int] = [0] * 256) -> list[int]:  # noqa: B006 (read only)
-    return _zeros[:n] if n <= len(_zeros) else [0] * n
-
-
-def _hips(db: NavDatabase) -> np.ndarray:
-    """The star table's HIP numbers in memory (once per opened database; indexing the
-    memory map costs more)."""
-    cache = db.__dict__.setdefault("_cache", {})
-    if "hip" not in cache:
-        cache["hip"] = np.array(db.stars.hip)
-    return cache["hip"]
-
-
-@njit(cache=True, nogil=True)
-def _star_columns(ref: np.ndarray, order: np.ndarray, mag: np.ndarray, cat: np.ndarray,
-                  residuals_arcsec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """RA and Dec (deg) of the catalogue directions ``ref[order]``, the stars' magnitudes and
-    the residuals (arcsec, ``residuals_arcsec[order]``), rounded as the answer reports them."""
-    n = len(order)
-    ra = np.empty(n)
-    dec = np.empty(n)
-    res = np.empty(n)
-    for i in range(n):
-        v = ref[order[i]]
-        ra[i] = math.degrees(math.atan2(v[1], v[0]) % (2 * math.pi))
-        dec[i] = math.degrees(math.asin(min(max(v[2], -1.0), 1.0)))
-        res[i] = residuals_arcsec[order[i]]
-    return ra, dec, np.round(mag[cat], 3), np.round(res, 3)
 
 PLAN_CACHE_SIZE = 256
 """Search plans kept per opened database (one per camera geometry, method and sigma seen)."""
@@ -528,42 +494,8 @@ def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma
     moved = moved or changed
     ref, seen = _apparent(db, v.cat, options)
     fit = estimate(obs.vec[v.obs], seen, matrix=None if moved else v.matrix, prior_sigma_rad=sigma_rad)
-    return _answer(obs, db, v.obs, v.cat, ref, fit.matrix, fit.residuals_arcsec, fit.rms_arcsec, fit.sigma_arcsec,
+    return answer(obs, db, v.obs, v.cat, ref, fit.matrix, fit.residuals_arcsec, fit.rms_arcsec, fit.sigma_arcsec,
                    v.false_prob, method)
-
-
-def _answer(obs: Observation, db: NavDatabase, obs_rows: np.ndarray, cat_rows: np.ndarray, ref: np.ndarray,
-            matrix: np.ndarray, residuals_arcsec: np.ndarray, rms_arcsec: float,
-            sigma_arcsec: tuple[float, float, float], false_prob: float, method: str) -> Solution:
-    """The :class:`Solution` of pairs ``obs_rows`` -> ``cat_rows`` (of ``db``) fitted as
-    ``matrix`` (ICRS -> body); ``ref`` the catalogue directions reported per star."""
-    ra, dec, roll = radec_roll(matrix)
-    index = obs.index[obs_rows]
-    if len(obs.cameras) == 1:
-        order = index.argsort(kind="stable")
-        camera = _zeros_list(len(order))
-    else:
-        cam_rows = obs.camera[obs_rows]
-        order = np.lexsort((index, cam_rows))
-        camera = cam_rows[order].tolist()
-    cat = cat_rows[order]
-    star_ra, star_dec, star_mag, star_res = _star_columns(ref, order, star_mags(db), cat, residuals_arcsec)
-    stars = tuple(map(_star_match, zip(  # by camera, then by centroid index; column-wise (~2x faster)
-        index[order].tolist(), _hips(db)[cat].tolist(), star_ra.tolist(), star_dec.tolist(), star_mag.tolist(),
-        star_res.tolist(), camera)))
-    q = matrix_to_quat(matrix)
-    return Solution(
-        SolveStatus.SOLVED,
-        method,
-        quaternion=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
-        ra_deg=ra,
-        dec_deg=dec,
-        roll_deg=roll,
-        stars=stars,
-        rms_arcsec=rms_arcsec,
-        false_match_probability=false_prob,
-        attitude_sigma_arcsec=sigma_arcsec,
-    )
 
 
 def solve_image(

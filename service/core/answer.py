@@ -87,10 +87,10 @@ def recheck(obs, db: NavDatabase, obs_idx: IntArray, cat_idx: IntArray, n_trials
     cat_idx = np.ascontiguousarray(cat_idx, dtype=np.int64)
     near_chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG) / 2)
     r = wahba_svd(obs.vec[obs_idx], star_vec[cat_idx])
-    ok, m_obs, m_cat, r, prob, _, _ = verify_pairs(
+    ok, m_obs, m_cat, r, prob = verify_pairs(
         obs.vec, obs.xy, star_vec, obs_idx, cat_idx, np.ascontiguousarray(r), g.cell, g.n_side, g.keys, g.starts,
-        g.stars, g.columns, near_chord, k.mounts[0], np.empty(len(star_vec), np.int64), np.zeros(0, np.int64),
-        np.zeros(3), k.mounts, k.cams, k.dist, k.rows, k.row_off, float(radius_px),
+        g.stars, g.columns, near_chord, k.mounts[0], np.empty(len(star_vec), np.int64), np.zeros(4), k.mounts,
+        k.cams, k.dist, k.rows, k.row_off, float(radius_px),
         1.5 * radius_px * obs.pixel_scale_rad, int(n_trials))
     return bool(ok), m_obs, m_cat, r, float(prob)
 

@@ -200,10 +200,10 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
                     k_cat[j] = deep_rows[m_cat[i]]
                     j += 1
             r0 = wahba_kernel(obs_vec[k_obs], d_vec[k_cat], np.ones(n_known))
-            ok, d_obs, d_cat, d_r, d_prob, _, _ = verify_pairs(
+            ok, d_obs, d_cat, d_r, d_prob = verify_pairs(
                 obs_vec, obs_xy, d_vec, k_obs, k_cat, r0, d_cell, d_side, d_keys, d_starts, d_stars, d_columns,
-                near_chord, mounts[0], np.empty(len(d_vec), np.int64), np.zeros(0, np.int64), np.zeros(3), mounts,
-                cams, dist, rows, row_off, radius_px, 1.5 * radius_px * pixel_scale, trials)
+                near_chord, mounts[0], np.empty(len(d_vec), np.int64), np.zeros(4), mounts, cams, dist, rows, row_off,
+                radius_px, 1.5 * radius_px * pixel_scale, trials)
             if ok and d_prob <= strong and len(d_obs) > len(m_obs):
                 m_obs, m_cat, r, prob, used_deep = d_obs, d_cat, d_r, d_prob, True
                 vec, cell, side, keys, starts, stars, columns, mags = d_vec, d_cell, d_side, d_keys, d_starts, \

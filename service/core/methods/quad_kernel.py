@@ -121,8 +121,8 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
     n_screen = min(n_obs, screen_stars + 3)
     mount = mounts[0]
     buf = np.empty(len(star_vec), np.int64)
-    near = np.zeros(0, np.int64)
-    near_bore = np.zeros(3)
+    near_state = np.zeros(4)  # the gathered field's size and boresight (_field): updated in place, so no
+    # array is reassigned inside the lookup loop (numba would count references on every table word)
     o = np.empty(4, np.int64)
     c = np.empty(4, np.int64)
     lab = np.empty(4, np.int64)
@@ -224,9 +224,9 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
                                 res = _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord,
                                               s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
                                               g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
-                                              near_chord, mount, buf, near, near_bore, mounts, cams, dist,
+                                              near_chord, mount, buf, near_state, mounts, cams, dist,
                                               rows, row_off, radius_px, quick_tol, trials)
-                                ok, m_obs, m_cat, r, prob, near, near_bore = res
+                                ok, m_obs, m_cat, r, prob = res
                                 if ok and prob <= max_false_prob:
                                     if prob <= strong_false_prob:
                                         return (STATUS_FOUND, o.copy(), lab.copy(), m_obs, m_cat, r, prob,
@@ -263,10 +263,9 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
 @njit(cache=True, nogil=True)
 def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s_side, s_keys, s_starts,
             s_stars, s_columns, g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, mount, buf,
-            near, near_bore, mounts, cams, dist, rows, row_off, radius_px, quick_tol, trials):
+            near_state, mounts, cams, dist, rows, row_off, radius_px, quick_tol, trials):
     """One hypothesis (observed rows ``o`` are catalogue rows ``lab``) through the verifier's
-    steps. Returns ``(ok, m_obs, m_cat, r, prob, near, near_bore)`` (the gathered field is
-    handed back for reuse)."""
+    steps. Returns ``(ok, m_obs, m_cat, r, prob)``."""
     empty = np.zeros(0, np.int64)
     r = wahba_kernel(obs_vec[o], star_vec[lab], np.ones(4))
     n_obs = len(obs_vec)
@@ -284,42 +283,41 @@ def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s
                 hits += 1
                 break
         if hits == 0:
-            return False, empty, empty, r, 1.0, near, near_bore
+            return False, empty, empty, r, 1.0
     return verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
-                        near_chord, mount, buf, near, near_bore, mounts, cams, dist, rows, row_off, radius_px,
+                        near_chord, mount, buf, near_state, mounts, cams, dist, rows, row_off, radius_px,
                         quick_tol, trials)
 
 
 @njit(cache=True, nogil=True)
 def verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
-                 near_chord, mount, buf, near, near_bore, mounts, cams, dist, rows, row_off, radius_px, quick_tol,
-                 trials):
+                 near_chord, mount, buf, near_state, mounts, cams, dist, rows, row_off, radius_px, quick_tol, trials):
     """The hypothesis "observed rows ``o`` are catalogue rows ``lab``" (any number of pairs; one
     camera) at attitude ``r`` through :meth:`~service.core.verify.Verifier.check`'s steps after
     its screen: pairing and refits, the near-miss test, and the coincidence bound multiplied by
-    ``trials``. Returns ``(ok, m_obs, m_cat, r, prob, near, near_bore)`` (the gathered field is
-    handed back for reuse)."""
+    ``trials``. Returns ``(ok, m_obs, m_cat, r, prob)``. ``buf`` (a row per catalogue star) and
+    ``near_state`` (4,) hold the gathered field between calls (:func:`_field`)."""
     empty = np.zeros(0, np.int64)
     n_obs = len(obs_vec)
-    near, near_bore = _field(r, mount, near, near_bore, near_chord, g_cell, g_side, g_keys, g_starts, g_stars,
-                             star_vec, g_columns, buf)
+    near = _field(r, mount, near_state, near_chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec,
+                  g_columns, buf)
     near_off = np.array([0, len(near)], np.int64)
     ok, m_obs, m_cat, p_single, r = _refine(obs_vec, obs_xy, star_vec, o, lab, r, quick_tol, near, near_off,
                                             mounts, cams, dist, rows, row_off, radius_px, 4)
     if not ok:
-        return False, empty, empty, r, 1.0, near, near_bore
+        return False, empty, empty, r, 1.0
     n_pairs = len(m_obs)
     for f in range(len(SETTLE)):  # the verifier's near-miss test (Verifier._settle)
-        near, near_bore = _field(r, mount, near, near_bore, near_chord, g_cell, g_side, g_keys, g_starts,
-                                 g_stars, star_vec, g_columns, buf)
+        near = _field(r, mount, near_state, near_chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec,
+                      g_columns, buf)
         near_off[1] = len(near)
         w_obs, w_cat, _ = _match_rig(r, obs_xy, star_vec, near, near_off, mounts, cams, dist, rows, row_off,
                                      SETTLE[f] * radius_px, 1.0)
         if len(w_obs) <= n_pairs + max(3, n_pairs // 3):
             continue
         r2 = _wahba_pairs(obs_vec, star_vec, w_obs, w_cat)
-        near, near_bore = _field(r2, mount, near, near_bore, near_chord, g_cell, g_side, g_keys, g_starts,
-                                 g_stars, star_vec, g_columns, buf)
+        near = _field(r2, mount, near_state, near_chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec,
+                      g_columns, buf)
         near_off[1] = len(near)
         ok2, s_obs, s_cat, p2, r2 = _refine(obs_vec, obs_xy, star_vec, w_obs[:0], w_cat[:0], r2, 1.0, near,
                                             near_off, mounts, cams, dist, rows, row_off, radius_px, 4)
@@ -336,20 +334,24 @@ def verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g
     n_extra = len(m_obs) - n_hyp
     n_free = n_obs - len(o)
     if len(m_obs) < 4 or n_extra < 1:
-        return False, empty, empty, r, 1.0, near, near_bore
+        return False, empty, empty, r, 1.0
     tail = binomial_tail(n_free, n_extra, min(p_single, 1.0)) if n_free >= n_extra else 1.0
     prob = min(1.0, tail * max(trials, 1))
-    return True, m_obs, m_cat, r, prob, near, near_bore
+    return True, m_obs, m_cat, r, prob
 
 
 @njit(cache=True, nogil=True)
-def _field(r, mount, near, near_bore, chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec, g_columns, buf):
-    """The catalogue rows near the boresight under ``r``, reusing the last gathering while the
-    boresight stays within 0.3 deg of it (the verifier's ``_near`` cache)."""
+def _field(r, mount, state, chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec, g_columns, buf):
+    """The catalogue rows near the boresight under ``r`` (a view of ``buf``), reusing the last
+    gathering while the boresight stays within 0.3 deg of it (the verifier's ``_near`` cache).
+    ``state`` (4,): the gathering's size and boresight, updated in place."""
     rc = mount @ r
-    dot = rc[2, 0] * near_bore[0] + rc[2, 1] * near_bore[1] + rc[2, 2] * near_bore[2]
-    if len(near) and dot >= NEAR_REUSE_COS:
-        return near, near_bore
+    n = int(state[0])
+    dot = rc[2, 0] * state[1] + rc[2, 1] * state[2] + rc[2, 2] * state[3]
+    if n > 0 and dot >= NEAR_REUSE_COS:
+        return buf[:n]
     n = collect_within(rc[2, 0], rc[2, 1], rc[2, 2], chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec,
                        g_columns, buf)
-    return buf[:n].copy(), rc[2].copy()
+    state[0] = n
+    state[1], state[2], state[3] = rc[2, 0], rc[2, 1], rc[2, 2]
+    return buf[:n]

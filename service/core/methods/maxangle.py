@@ -190,6 +190,7 @@ class MaxAngleMatcher:
         self.d_max = math.radians(prm["d_max_deg"])
         self.xi = math.radians(prm["xi_deg"])
         self.vec = db.stars.vec
+        self.block_start = bucket_starts(np.asarray(self.key), self.n_blocks)
 
     def observed_triangles(self, d: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Usable triangles of the observed stars with pairwise angles ``d`` ``(n, n)``, best
@@ -214,7 +215,7 @@ class MaxAngleMatcher:
         ``which`` the index of the observed triangle of each row (ascending). With
         ``max_per_triangle > 0`` every candidate of a triangle matching more than that many
         catalogue triangles is dropped (it carries no information)."""
-        return _query(self.key, self.c, self.theta, self.ids, self.vec,
+        return _query(self.key, self.block_start, self.c, self.theta, self.ids, self.vec,
                       np.ascontiguousarray(obs_vec, dtype=np.float64),
                       np.ascontiguousarray(labels, dtype=np.int64),
                       np.ascontiguousarray(sides, dtype=np.float64),
@@ -267,28 +268,72 @@ def _chunks(total: int) -> list[int]:
     return sizes
 
 
+SUB_BUCKETS = 64
+"""Each theta block's ``b`` range is cut into this many buckets for the query's slice search."""
+
+
+def bucket_starts(key: np.ndarray, n_blocks: int) -> np.ndarray:
+    """Where each ``b`` bucket of each theta block begins in the sorted ``key`` (``key = block +
+    b / b_scale``): ``(n_blocks * SUB_BUCKETS + 1,)`` int64, built once per opened table."""
+    edges = (np.arange(n_blocks * SUB_BUCKETS + 1, dtype=np.float64) / SUB_BUCKETS)
+    return np.searchsorted(key, edges).astype(np.int64)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _slice(key: np.ndarray, starts: np.ndarray, blk: int, b: float, eps: float, b_scale: float
+           ) -> tuple[int, int]:
+    """``(start, count)`` of block ``blk``'s records with side ``b +- eps``: a binary search
+    inside the few buckets the slice spans, not over the whole table (~21 chained cache misses
+    a block)."""
+    f_lo = (b - eps) / b_scale
+    f_hi = (b + eps) / b_scale
+    s_lo = min(max(int(f_lo * SUB_BUCKETS), 0), SUB_BUCKETS - 1)
+    s_hi = min(max(int(f_hi * SUB_BUCKETS), 0), SUB_BUCKETS - 1)
+    lo = starts[blk * SUB_BUCKETS + s_lo]
+    hi = starts[blk * SUB_BUCKETS + s_hi + 1]
+    part = key[lo:hi]
+    start = np.searchsorted(part, blk + f_lo, side="left")
+    end = np.searchsorted(part, blk + f_hi, side="right")
+    return lo + start, max(end - start, 0)
+
+
 @njit(cache=True, nogil=True)
-def _query(key: np.ndarray, c_tab: np.ndarray, th_tab: np.ndarray, ids: np.ndarray, star_vec: np.ndarray,
-           obs_vec: np.ndarray, labels: np.ndarray, sides: np.ndarray, theta: np.ndarray, tol: np.ndarray,
+def _query(key: np.ndarray, block_start: np.ndarray, c_tab: np.ndarray, th_tab: np.ndarray, ids: np.ndarray,
+           star_vec: np.ndarray, obs_vec: np.ndarray, labels: np.ndarray, sides: np.ndarray, theta: np.ndarray, tol: np.ndarray,
            eps: float, n_blocks: int, b_scale: float, max_per_triangle: int) -> tuple[np.ndarray, np.ndarray]:
     """Compiled query: the blocks covering ``theta +- tol``, the ``b +- eps`` slice of each
     (binary search on the composite key), then ``c``, ``theta`` and the longest side ``a``
-    (from ``b``, ``c``, ``theta``) within tolerance, then handedness."""
-    cap = 256
+    (from ``b``, ``c``, ``theta``) within tolerance, then handedness.
+
+    Each block's slice is found by binary search inside its ``b`` buckets (``block_start``,
+    :func:`bucket_starts`).
+    The output is sized once (no array is reassigned inside the scan, which would make numba
+    count references on every record), and a triangle's scan stops once it has more than
+    ``max_per_triangle`` rows (they would all be dropped)."""
+    n_tri = len(theta)
+    lo = np.empty((n_tri, 2), np.int64)
+    cap = 0
+    for t in range(n_tri):
+        th, tl = theta[t], tol[t]
+        lo[t, 0] = min(max(int(n_blocks * (th - tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
+        lo[t, 1] = min(max(int(n_blocks * (th + tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
+        if max_per_triangle > 0:
+            cap += max_per_triangle + 1
+        else:  # unbounded: the slices' sizes
+            for blk in range(lo[t, 0], lo[t, 1] + 1):
+                cap += _slice(key, block_start, blk, sides[t, 1], eps, b_scale)[1]
     rows = np.empty(cap, np.int64)
     which = np.empty(cap, np.int64)
     n_out = 0
-    for t in range(len(theta)):
+    for t in range(n_tri):
         first = n_out
         a_obs, b_obs, c_obs = sides[t, 0], sides[t, 1], sides[t, 2]
         th, tl = theta[t], tol[t]
         h_obs = triple_product(obs_vec[labels[t, 0]], obs_vec[labels[t, 1]], obs_vec[labels[t, 2]])
-        blk_lo = min(max(int(n_blocks * (th - tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
-        blk_hi = min(max(int(n_blocks * (th + tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
-        for blk in range(blk_lo, blk_hi + 1):
-            start = np.searchsorted(key, blk + (b_obs - eps) / b_scale, side="left")
-            end = np.searchsorted(key, blk + (b_obs + eps) / b_scale, side="right")
-            for r in range(start, end):
+        full = False
+        for blk in range(lo[t, 0], lo[t, 1] + 1):
+            start, count = _slice(key, block_start, blk, b_obs, eps, b_scale)
+            for r in range(start, start + count):
                 if abs(c_tab[r] - c_obs) > eps or abs(th_tab[r] - th) > tl:
                     continue
                 b_rec = (key[r] - math.floor(key[r])) * b_scale
@@ -299,16 +344,14 @@ def _query(key: np.ndarray, c_tab: np.ndarray, th_tab: np.ndarray, ids: np.ndarr
                 h_cat = triple_product(star_vec[ids[r, 0]], star_vec[ids[r, 1]], star_vec[ids[r, 2]])
                 if (h_cat > 0) != (h_obs > 0):
                     continue
-                if n_out == cap:
-                    cap *= 2
-                    rows2 = np.empty(cap, np.int64)
-                    which2 = np.empty(cap, np.int64)
-                    rows2[:n_out] = rows[:n_out]
-                    which2[:n_out] = which[:n_out]
-                    rows, which = rows2, which2
                 rows[n_out] = r
                 which[n_out] = t
                 n_out += 1
+                if max_per_triangle > 0 and n_out - first > max_per_triangle:
+                    full = True
+                    break
+            if full:
+                break
         if max_per_triangle > 0 and n_out - first > max_per_triangle:
             n_out = first
     return rows[:n_out].copy(), which[:n_out].copy()

@@ -44,8 +44,7 @@ from ..verify import Verified, check_unique_triangle
 from ._pairs import (
     PairLimits,
     SharedPairs,
-    edge_keys,
-    join_triangles,
+    join_windows,
     pair_limits,
     require_shared,
     same_handedness,
@@ -147,12 +146,6 @@ class TriangleMatcher:
         end = np.array([a + np.count_nonzero(y <= x) for a, y, x in zip(s, seg, hi, strict=True)], np.int64)
         return start, end
 
-    def _edges(self, start: int, end: int) -> np.ndarray:
-        """Directed catalogue edges of table rows ``[start, end)``, sorted by first star."""
-        p = self.pairs[start:end].astype(np.int64)
-        both = np.concatenate([p, p[:, ::-1]])
-        return both[np.argsort(both[:, 0], kind="stable")]
-
     def triples(self, v: np.ndarray, eps: float) -> np.ndarray:
         """Catalogue triples ``(K, 3)`` matching the observed triangle ``v`` ``(3, 3)`` on all
         three sides within ``eps`` with the same handedness (vertex order kept).
@@ -164,8 +157,8 @@ class TriangleMatcher:
         q, r = [x for x in range(3) if x != p]
         sides = np.array([d[p, q], d[p, r], d[q, r]])
         s, e = self.windows(sides - eps, sides + eps)
-        cand = join_triangles(self._edges(s[0], e[0]), self._edges(s[1], e[1]),
-                              edge_keys(self._edges(s[2], e[2]), self.n_stars), self.n_stars)
+        cand = join_windows(self.pairs, int(s[0]), int(e[0]), int(s[1]), int(e[1]), int(s[2]), int(e[2]),
+                            self.n_stars)
         if len(cand) == 0:
             return cand
         out = np.empty_like(cand)

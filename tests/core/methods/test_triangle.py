@@ -97,3 +97,30 @@ def test_classic_brightness_order_solves_too(db: NavDatabase) -> None:
             del db.__dict__["_matchers"]["triangle"]
         else:
             db.__dict__["_matchers"]["triangle"] = saved
+
+
+def test_compiled_join_gives_the_vectorised_join_in_its_order(db: NavDatabase) -> None:
+    # the windows of the density box (wide: tens of thousands of pairs) and of a query
+    from service.core.methods._pairs import edge_keys, join_triangles, join_windows
+
+    m = get_matcher(db, "triangle")
+    pairs, angles = np.asarray(m.pairs), np.asarray(m.angles)
+
+    def edges(s: int, e: int) -> np.ndarray:  # both orientations, stably sorted by first star
+        p = pairs[s:e].astype(np.int64)
+        both = np.concatenate([p, p[:, ::-1]])
+        return both[np.argsort(both[:, 0], kind="stable")]
+
+    rng = np.random.default_rng(5)
+    compared = 0
+    for width in (2e-5, 2e-4, 2e-3):
+        for _ in range(6):
+            sides = rng.uniform(0.01, m.max_angle * 0.9, 3)
+            s = np.searchsorted(angles, sides - width)
+            e = np.searchsorted(angles, sides + width, side="right")
+            want = join_triangles(edges(s[0], e[0]), edges(s[1], e[1]), edge_keys(edges(s[2], e[2]), m.n_stars),
+                                  m.n_stars)
+            got = join_windows(pairs, int(s[0]), int(e[0]), int(s[1]), int(e[1]), int(s[2]), int(e[2]), m.n_stars)
+            np.testing.assert_array_equal(got, want.reshape(-1, 3))
+            compared += len(want)
+    assert compared > 100

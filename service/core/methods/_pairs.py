@@ -179,32 +179,37 @@ def _in_set(table: np.ndarray, mask: int, key: int) -> bool:
 
 
 @njit(cache=True, nogil=True)
+def _adjacency(pairs: np.ndarray, s: int, e: int, n_stars: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``[s, e)`` of ``pairs`` in both orientations grouped by first star (a stable
+    counting sort: forward rows, then reversed, in table order): star ``a``'s neighbours are
+    ``adj[start[a]:start[a + 1]]``."""
+    start = np.zeros(n_stars + 1, np.int64)
+    for r in range(s, e):
+        start[pairs[r, 0] + 1] += 1
+        start[pairs[r, 1] + 1] += 1
+    for a in range(n_stars):
+        start[a + 1] += start[a]
+    fill = start[:-1].copy()
+    adj = np.empty(2 * (e - s), np.int64)
+    for o in range(2):
+        for r in range(s, e):
+            a = pairs[r, o]
+            adj[fill[a]] = pairs[r, 1 - o]
+            fill[a] += 1
+    return start, adj
+
+
+@njit(cache=True, nogil=True)
 def join_windows(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_ik: int, s_jk: int, e_jk: int,
                  n_stars: int) -> np.ndarray:
     """:func:`join_triangles` of three windows of the pair table (rows ``[s, e)`` of ``pairs``,
     each taken in both orientations), compiled and without sorting: the ``a-c`` window as an
     adjacency list by star (a counting sort, stable), the ``b-c`` window as a hash set. The
     triples come in the order :func:`join_triangles` gives for edges stably sorted by first
-    star (``TriangleMatcher._edges``): by ``a``, then the ``a-b`` edge's position, then the
+    star: by ``a``, then the ``a-b`` edge's position, then the
     ``a-c`` edge's. A window of the density box holds tens of thousands of pairs; the
     vectorised join spent milliseconds in its sorts."""
-    # a-c: adjacency by a, both orientations, in table order (forward rows, then reversed)
-    start = np.zeros(n_stars + 1, np.int64)
-    for r in range(s_ik, e_ik):
-        start[pairs[r, 0] + 1] += 1
-        start[pairs[r, 1] + 1] += 1
-    for a in range(n_stars):
-        start[a + 1] += start[a]
-    fill = start[:-1].copy()
-    adj = np.empty(2 * (e_ik - s_ik), np.int64)
-    for r in range(s_ik, e_ik):
-        a = pairs[r, 0]
-        adj[fill[a]] = pairs[r, 1]
-        fill[a] += 1
-    for r in range(s_ik, e_ik):
-        a = pairs[r, 1]
-        adj[fill[a]] = pairs[r, 0]
-        fill[a] += 1
+    start, adj = _adjacency(pairs, s_ik, e_ik, n_stars)  # a-c, by a
     # b-c: a set of keys b * n_stars + c (both orientations), open addressing
     size = 16
     while size < 4 * (e_jk - s_jk) + 16:
@@ -218,25 +223,7 @@ def join_windows(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_ik: int, 
             while table[h] != 0 and table[h] != key:
                 h = (h + 1) & mask
             table[h] = key
-    # a-b edges stably sorted by a: forward rows where a is first, then reversed rows
-    order_start = np.zeros(n_stars + 1, np.int64)
-    for r in range(s_ij, e_ij):
-        order_start[pairs[r, 0] + 1] += 1
-        order_start[pairs[r, 1] + 1] += 1
-    for a in range(n_stars):
-        order_start[a + 1] += order_start[a]
-    put = order_start[:-1].copy()
-    ab = np.empty((2 * (e_ij - s_ij), 2), np.int64)
-    for r in range(s_ij, e_ij):
-        a = pairs[r, 0]
-        ab[put[a], 0] = a
-        ab[put[a], 1] = pairs[r, 1]
-        put[a] += 1
-    for r in range(s_ij, e_ij):
-        a = pairs[r, 1]
-        ab[put[a], 0] = a
-        ab[put[a], 1] = pairs[r, 0]
-        put[a] += 1
+    ab_start, ab_adj = _adjacency(pairs, s_ij, e_ij, n_stars)  # a-b, by a: the stable order by first star
     n = 0
     for sweep in range(2):  # count, then fill (no array reassigned inside the loop)
         if sweep == 1:
@@ -244,8 +231,11 @@ def join_windows(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_ik: int, 
             n = 0
         else:
             out = np.empty((0, 3), np.int64)
-        for k in range(len(ab)):
-            a, b = ab[k, 0], ab[k, 1]
+        a_of = 0
+        for k in range(len(ab_adj)):
+            while ab_start[a_of + 1] <= k:
+                a_of += 1
+            a, b = a_of, ab_adj[k]
             for q in range(start[a], start[a + 1]):
                 c = adj[q]
                 if c == b or not _in_set(table, mask, b * n_stars + c + 1):

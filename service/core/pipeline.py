@@ -97,6 +97,13 @@ FEW_STARS_BUDGET_MS = 20.0
 """Time the first fallback gets after ``quad`` searched a frame of 5-7 stars exhaustively (it
 proves them in 1-6 ms; see ``QUAD_REFUSE_STARS``)."""
 
+SPARSE_PROOF_METHODS = frozenset({"triangle"})
+"""Methods that can prove a frame of fewer stars than the verifier's ``min_matches`` (4): the
+verifier needs a pair beyond the pattern, so only ``triangle``'s unique-triangle proof
+(``verify.check_unique_triangle``) names a 3-star frame; the others are skipped on it (seed
+002 at 1.5 px, 3 centroids of which one false: 0.8 -> 0.2 ms median; a true 3-star frame's
+time is triangle's own, ~12 ms)."""
+
 COMPILED_FIRST_PASS = True
 """Run ``auto``'s first pass as one compiled call (:mod:`service.core.first_pass`); False takes
 the same steps through the general path (four compiled calls; the tests compare the two)."""
@@ -313,6 +320,8 @@ def _identify(
     tol = (3.0 * math.sqrt(2.0) * sigma + 0.5) * obs.pixel_scale_rad
     verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob, trials=trials,
                         deadline=deadline)
+    if len(obs) < verifier.min_matches:  # only a sparse proof can name so few stars (SPARSE_PROOF_METHODS)
+        methods = [name for name in methods if name in SPARSE_PROOF_METHODS]
     used = methods[-1] if methods else ""
     for name in methods:
         if tried is not None:

@@ -20,29 +20,19 @@ import numpy as np
 from numba import njit
 
 from .attitude import wahba_svd
+from .camera import project_to_pixel
 from .blends import MIN_DELTA_MAG, dominant_kernel
 from .methods.quad_kernel import verify_pairs
 from .navdb.reader import NavDatabase
 from .photometry import (FAINT_GATE_MAG, MIN_PAIRS, THRESHOLD_MAG, completeness_kernel, faintest_inverted_kernel,
                          too_bright_kernel)
 from .residuals import distant_kernel
-from .skygrid import SkyGrid, build_sky_grid, collect_within
+from .skygrid import collect_within
 from .types import IntArray
-from .verify import NEAR_MARGIN_DEG
+from .verify import NEAR_MARGIN_DEG, field_grid
 
-FIELD_CELL_DEG = 1.0
-"""Cell of the grid that gathers a field's catalogue stars (about the field's size / 10)."""
 FIELD_MARGIN_DEG = 0.1
 """The field's stars are gathered this far beyond the image's half-diagonal."""
-
-
-def field_grid(db: NavDatabase) -> SkyGrid:
-    """The database's stars on a grid of ``FIELD_CELL_DEG`` cells (built once per opened
-    database), for gathering a whole field in a compiled kernel."""
-    cache = db.__dict__.setdefault("_cache", {})
-    if "field_grid" not in cache:
-        cache["field_grid"] = build_sky_grid(np.asarray(db.stars.vec), cell_rad=math.radians(FIELD_CELL_DEG))
-    return cache["field_grid"]
 
 
 def star_mags(db: NavDatabase) -> np.ndarray:
@@ -104,28 +94,12 @@ def field_stars(r_cam: np.ndarray, chord: float, cell: float, n_side: int, keys:
     buf = np.empty(len(star_vec), np.int64)
     n = collect_within(r_cam[2, 0], r_cam[2, 1], r_cam[2, 2], chord, cell, n_side, keys, starts, stars, star_vec,
                        columns, buf)
-    f, cx, cy, w, h = cam[0], cam[1], cam[2], cam[3], cam[4]
-    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
-    distorted = k1 != 0 or k2 != 0 or p1 != 0 or p2 != 0 or k3 != 0
     rows = np.empty(n, np.int64)
     pxy = np.empty((n, 2))
     m = 0
     for i in range(n):
-        v = star_vec[buf[i]]
-        z = r_cam[2, 0] * v[0] + r_cam[2, 1] * v[1] + r_cam[2, 2] * v[2]
-        if z <= 1e-9:
-            continue
-        xn = (r_cam[0, 0] * v[0] + r_cam[0, 1] * v[1] + r_cam[0, 2] * v[2]) / z
-        yn = (r_cam[1, 0] * v[0] + r_cam[1, 1] * v[1] + r_cam[1, 2] * v[2]) / z
-        if distorted:
-            r2 = xn * xn + yn * yn
-            radial = 1 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
-            xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
-            yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
-            xn, yn = xd, yd
-        x = f * xn + cx
-        y = f * yn + cy
-        if x >= -0.5 and x <= w - 0.5 and y >= -0.5 and y <= h - 0.5:
+        inside, x, y = project_to_pixel(r_cam, star_vec[buf[i]], cam, dist)
+        if inside:
             rows[m] = buf[i]
             pxy[m, 0] = x
             pxy[m, 1] = y

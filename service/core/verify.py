@@ -30,7 +30,6 @@ from scipy.special import betainc
 
 from .attitude import ARCSEC_PER_RAD, wahba_svd
 from .camera import Camera
-from .geometry import cross
 from .match import RigArrays, match_rig, refine, rig_arrays
 from .navdb.reader import NavDatabase
 from .screen import screen_hits
@@ -400,136 +399,14 @@ def sky_grid(db: NavDatabase) -> SkyGrid:
     return cache["grid"]
 
 
-# ---- sparse fields: a uniquely matched triangle as its own proof ----------------------------
-# Appended for frames of 3-4 stars, which have no fourth star to confirm a triangle. It reads
-# the Verifier (``obs``, ``db``, ``match_radius_px``, ``max_false_prob``, ``_match_all``) and is
-# independent of ``screen_and_check``/``_screen``.
-
-SPARSE_CONFIDENCE = 0.95
-"""Confidence of the Poisson upper bound on the local density of consistent triangles."""
-SPARSE_MAX_SAMPLE = 3000
-"""At most this many catalogue triples of the density box are projected (a random sample)."""
+FIELD_CELL_DEG = 1.0
+"""Cell of the grid that gathers a field's catalogue stars (about the field's size / 10)."""
 
 
-def check_unique_triangle(
-    verifier: Verifier,
-    obs_idx: IntArray,
-    cat_idx: IntArray,
-    *,
-    box_cands: IntArray,
-    box_halfwidth_rad: float,
-    n_looks: int,
-) -> Verified | None:
-    """Prove a frame too sparse for a fourth star by a triangle that matched one catalogue triple.
-
-    Null hypothesis: the observed triangle is unrelated to the sky (false stars, a planet, a
-    star missing from the database). Its chance to fall within ``delta`` (the largest of the
-    three side mismatches, measured on this match) of some catalogue triangle that would
-    produce this frame is at most the expected count of such triangles in the box
-    ``|d_cat - d_obs| <= delta`` on all three sides: ``E = rho (2 delta)^3``. A catalogue
-    triangle *would produce this frame* when the attitude mapping it onto the observed stars
-    predicts no further catalogue star inside the image that nobody observed. The density
-    ``rho`` is estimated from the database: ``box_cands`` are all catalogue triples (same vertex
-    order and handedness) within ``box_halfwidth_rad`` = W of the observed sides; with ``k`` of
-    them (the match itself left out: given a point of a Poisson process, the others are still
-    Poisson) consistent with the frame, ``E = k_up (delta / W)^3``, ``k_up`` the Poisson upper
-    bound on ``k`` at ``SPARSE_CONFIDENCE``. Accepted when the match is unique (the caller's
-    duty), its own field is consistent, and ``n_looks * E <= max_false_prob``, ``n_looks`` being
-    the number of observed triangles the method could have tried.
-
-    Returns the proven match (``false_prob = n_looks * E``), or None.
-    """
-    from scipy.special import gammaincinv
-
-    from .geometry import pairwise_angles
-
-    obs = verifier.obs
-    stars = verifier.db.stars.vec
-    obs_idx = np.asarray(obs_idx, dtype=np.int64)
-    cat_idx = np.asarray(cat_idx, dtype=np.int64)
-    if len(obs_idx) != 3 or len(np.unique(cat_idx)) != 3:
-        return None
-    r = wahba_svd(obs.vec[obs_idx], stars[cat_idx])
-    radius = verifier.match_radius_px * obs.pixel_scale_rad
-    if np.any(np.linalg.norm(stars[cat_idx] @ r.T - obs.vec[obs_idx], axis=1) > radius):
-        return None
-    unseen, explained = _field_check(verifier, r[None], cat_idx[None], obs_idx)
-    if unseen[0] > 0:
-        return None
-    m_obs, m_cat, _ = verifier._match_all(r)
-    if not np.all(np.isin(obs_idx, m_obs)):
-        return None
-    delta = float(np.max(np.abs(pairwise_angles(obs.vec[obs_idx]) - pairwise_angles(stars[cat_idx]))))
-    box = np.asarray(box_cands, dtype=np.int64).reshape(-1, 3)
-    box = box[~np.all(box == cat_idx, axis=1)]  # the background around the match, without it
-    thin = 1.0
-    if len(box) > SPARSE_MAX_SAMPLE:  # a random thinning of a Poisson count is Poisson
-        thin = len(box) / SPARSE_MAX_SAMPLE
-        box = box[np.random.default_rng(0).choice(len(box), SPARSE_MAX_SAMPLE, replace=False)]
-    rs = _sparse_attitudes(obs.vec[obs_idx], stars, box)
-    k = 0
-    if len(box):
-        box_unseen, box_explained = _field_check(verifier, rs, box, obs_idx)
-        k = int(np.count_nonzero((box_unseen == 0) & (box_explained >= explained[0])))
-    expected = thin * float(gammaincinv(k + 1, SPARSE_CONFIDENCE)) * (delta / box_halfwidth_rad) ** 3
-    prob = min(1.0, expected * max(n_looks, 1))
-    if prob > verifier.max_false_prob:
-        return None
-    return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), prob, max(n_looks, 1))
-
-
-def _sparse_attitudes(obs_vec: FloatArray, stars: FloatArray, cands: IntArray) -> FloatArray:
-    """ICRS -> body rotations ``(K, 3, 3)`` mapping each catalogue triple onto the observed
-    triangle (TRIAD on its first two stars, vectorised)."""
-
-    def frames(a: FloatArray, b: FloatArray) -> FloatArray:
-        t1 = a / np.linalg.norm(a, axis=-1, keepdims=True)
-        t2 = cross(a, b)
-        t2 /= np.linalg.norm(t2, axis=-1, keepdims=True)
-        return np.stack([t1, t2, cross(t1, t2)], axis=-1)  # columns t1, t2, t3
-
-    o = frames(obs_vec[0][None, :], obs_vec[1][None, :])[0]
-    c = frames(stars[cands[:, 0]], stars[cands[:, 1]])
-    return np.einsum("ij,kmj->kim", o, c)  # R = O C^T
-
-
-def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,
-                 obs_idx: IntArray, *, max_near: int = 96) -> tuple[IntArray, IntArray]:
-    """For each attitude ``rs[k]`` with its catalogue triple ``cands[k]`` matched to the
-    observed rows ``obs_idx``: how many catalogue stars it predicts inside an image (at least
-    one match radius from the edge) with no observed star within the match radius (stars the
-    camera should have seen), and how many of the other observed stars it explains (a
-    predicted star within the match radius). Vectorised over K; looks at the ``max_near``
-    catalogue stars nearest each boresight."""
-    obs = verifier.obs
-    stars = verifier.db.stars.vec
-    tree = star_tree(verifier.db)
-    rad = verifier.match_radius_px
-    unseen = np.zeros(len(rs), dtype=np.int64)
-    explained = np.zeros(len(rs), dtype=np.int64)
-    if len(rs) == 0:
-        return unseen, explained
-    for c, cam in enumerate(obs.cameras):
-        r_cam = np.einsum("ij,kjl->kil", obs.mountings[c], rs)
-        half = math.radians(cam.diagonal_fov_deg / 2 + 0.2)
-        kk = min(max_near, len(stars))
-        _, near = tree.query(r_cam[:, 2, :], k=kk, distance_upper_bound=2 * math.sin(half / 2))
-        near = np.asarray(near).reshape(len(rs), kk)
-        valid = near < len(stars)
-        valid &= ~(near[:, :, None] == cands[:, None, :]).any(axis=2)
-        k_of = np.nonzero(valid)[0]
-        star = near[valid]
-        v_cam = np.einsum("nij,nj->ni", r_cam[k_of], stars[star])
-        pxy, inside = cam.vector_to_pixel(v_cam)
-        k_all, p_all = k_of[inside], pxy[inside]
-        rows = np.setdiff1d(obs.by_camera[c], obs_idx)
-        edge = cam.contains(p_all, margin_px=rad)
-        if len(rows) and len(p_all):
-            close = ((p_all[:, None, :] - obs.xy[rows][None, :, :]) ** 2).sum(axis=2) <= rad * rad
-            seen = close.any(axis=1)
-            kr = np.unique((k_all[:, None] * len(rows) + np.arange(len(rows))[None, :])[close])
-            explained += np.bincount(kr // len(rows), minlength=len(rs))
-        else:
-            seen = np.zeros(len(p_all), bool)
-        unseen += np.bincount(k_all[edge & ~seen], minlength=len(rs))
-    return unseen, explained
+def field_grid(db: NavDatabase) -> SkyGrid:
+    """The database's stars on a grid of ``FIELD_CELL_DEG`` cells (built once per opened
+    database), for gathering a whole field in a compiled kernel."""
+    cache = db.__dict__.setdefault("_cache", {})
+    if "field_grid" not in cache:
+        cache["field_grid"] = build_sky_grid(np.asarray(db.stars.vec), cell_rad=math.radians(FIELD_CELL_DEG))
+    return cache["field_grid"]

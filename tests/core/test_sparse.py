@@ -2,7 +2,7 @@
 and one in five holds three or fewer. A frame of three stars has no fourth star to confirm its
 triangle; ``triangle`` proves it when the triangle matches one catalogue triple and the chance
 that an unrelated triangle lands that close to a catalogue triangle consistent with the frame
-is below the bound (``verify.check_unique_triangle``). Random 3-4 point frames are the
+is below the bound (``sparse_proof.check_unique_triangle``). Random 3-4 point frames are the
 dangerous case: 1000 of them must all be refused."""
 
 from __future__ import annotations

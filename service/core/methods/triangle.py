@@ -25,12 +25,13 @@ Faithful parts and the choices made where the classic is vague:
   the most distinctive one. Measured in docs/methods.md.
 - **Sparse fields.** With three stars there is no fourth star. When a frame's triangle
   matches exactly one catalogue triple, the matcher asks the verifier for the sparse proof
-  (``verify.check_unique_triangle``): the expected number of catalogue triangles, consistent
+  (``sparse_proof.check_unique_triangle``): the expected number of catalogue triangles, consistent
   with the frame, inside the box of the measured mismatch, estimated from the pair table.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from itertools import combinations
 from typing import Any
@@ -40,7 +41,8 @@ import numpy as np
 from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
-from ..verify import Verified, check_unique_triangle
+from ..sparse_proof import check_unique_triangle
+from ..verify import Verified
 from ._pairs import (
     PairLimits,
     SharedPairs,
@@ -213,9 +215,8 @@ class TriangleMatcher:
         n_looks = math.comb(n, 3)
         best: Verified | None = None
         for idx, cat in unique:
-            box = self._density_box(ctx.obs.vec[idx], eps)
-            found = check_unique_triangle(ctx.verifier, idx, cat, box_cands=box[0], box_halfwidth_rad=box[1],
-                                          n_looks=n_looks)
+            found = check_unique_triangle(ctx.verifier, idx, cat, n_looks=n_looks,
+                                          density_box=functools.partial(self._density_box, ctx.obs.vec[idx], eps))
             if found is None:
                 continue
             if best is not None and not np.array_equal(np.sort(best.cat), np.sort(found.cat)):

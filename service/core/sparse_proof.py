@@ -1,0 +1,202 @@
+"""Sparse fields: a uniquely matched triangle as its own proof.
+
+For frames of 3-4 stars, which have no fourth star to confirm a triangle
+(:func:`check_unique_triangle`, called by ``triangle``). It reads the
+:class:`~service.core.verify.Verifier` (``obs``, ``db``, ``match_radius_px``, ``max_false_prob``,
+``_match_all``). The field test of every candidate attitude (the match and up to
+``SPARSE_MAX_SAMPLE`` catalogue triples of its density box) is one compiled call per camera
+(:func:`field_check_kernel`): the vectorised version queried a k-d tree for the 96 nearest
+stars of every attitude and compared ``K x 96`` predictions with every observed star (~5 ms
+for 3,000 attitudes).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from numba import njit
+from scipy.special import gammaincinv
+
+from .attitude import wahba_svd
+from .camera import project_to_pixel
+from .geometry import cross, pairwise_angles
+from .match import _camera_rows
+from .skygrid import collect_within
+from .types import FloatArray, IntArray
+from .verify import Verified, Verifier, field_grid
+
+SPARSE_CONFIDENCE = 0.95
+"""Confidence of the Poisson upper bound on the local density of consistent triangles."""
+SPARSE_MAX_SAMPLE = 3000
+"""At most this many catalogue triples of the density box are projected (a random sample)."""
+
+
+def check_unique_triangle(
+    verifier: Verifier,
+    obs_idx: IntArray,
+    cat_idx: IntArray,
+    *,
+    density_box: Callable[[], tuple[IntArray, float]],
+    n_looks: int,
+) -> Verified | None:
+    """Prove a frame too sparse for a fourth star by a triangle that matched one catalogue triple.
+
+    Null hypothesis: the observed triangle is unrelated to the sky (false stars, a planet, a
+    star missing from the database). Its chance to fall within ``delta`` (the largest of the
+    three side mismatches, measured on this match) of some catalogue triangle that would
+    produce this frame is at most the expected count of such triangles in the box
+    ``|d_cat - d_obs| <= delta`` on all three sides: ``E = rho (2 delta)^3``. A catalogue
+    triangle *would produce this frame* when the attitude mapping it onto the observed stars
+    predicts no further catalogue star inside the image that nobody observed. The density
+    ``rho`` is estimated from the database: ``density_box()`` gives all catalogue triples (same
+    vertex order and handedness) within a half-width W of the observed sides, and W (radians;
+    called only once the match itself passes, as gathering the box costs milliseconds); with ``k`` of
+    them (the match itself left out: given a point of a Poisson process, the others are still
+    Poisson) consistent with the frame, ``E = k_up (delta / W)^3``, ``k_up`` the Poisson upper
+    bound on ``k`` at ``SPARSE_CONFIDENCE``. Accepted when the match is unique (the caller's
+    duty), its own field is consistent, and ``n_looks * E <= max_false_prob``, ``n_looks`` being
+    the number of observed triangles the method could have tried.
+
+    Returns the proven match (``false_prob = n_looks * E``), or None.
+    """
+    obs = verifier.obs
+    stars = verifier.db.stars.vec
+    obs_idx = np.asarray(obs_idx, dtype=np.int64)
+    cat_idx = np.asarray(cat_idx, dtype=np.int64)
+    if len(obs_idx) != 3 or len(np.unique(cat_idx)) != 3:
+        return None
+    r = wahba_svd(obs.vec[obs_idx], stars[cat_idx])
+    radius = verifier.match_radius_px * obs.pixel_scale_rad
+    if np.any(np.linalg.norm(stars[cat_idx] @ r.T - obs.vec[obs_idx], axis=1) > radius):
+        return None
+    unseen, explained = _field_check(verifier, r[None], cat_idx[None], obs_idx)
+    if unseen[0] > 0:
+        return None
+    m_obs, m_cat, _ = verifier._match_all(r)
+    if not np.all(np.isin(obs_idx, m_obs)):
+        return None
+    delta = float(np.max(np.abs(pairwise_angles(obs.vec[obs_idx]) - pairwise_angles(stars[cat_idx]))))
+    box_cands, box_halfwidth_rad = density_box()
+    box = np.asarray(box_cands, dtype=np.int64).reshape(-1, 3)
+    box = box[~np.all(box == cat_idx, axis=1)]  # the background around the match, without it
+    thin = 1.0
+    if len(box) > SPARSE_MAX_SAMPLE:  # a random thinning of a Poisson count is Poisson
+        thin = len(box) / SPARSE_MAX_SAMPLE
+        box = box[np.random.default_rng(0).choice(len(box), SPARSE_MAX_SAMPLE, replace=False)]
+    rs = _sparse_attitudes(obs.vec[obs_idx], stars, box)
+    k = 0
+    if len(box):
+        box_unseen, box_explained = _field_check(verifier, rs, box, obs_idx)
+        k = int(np.count_nonzero((box_unseen == 0) & (box_explained >= explained[0])))
+    expected = thin * float(gammaincinv(k + 1, SPARSE_CONFIDENCE)) * (delta / box_halfwidth_rad) ** 3
+    prob = min(1.0, expected * max(n_looks, 1))
+    if prob > verifier.max_false_prob:
+        return None
+    return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), prob, max(n_looks, 1))
+
+
+def _sparse_attitudes(obs_vec: FloatArray, stars: FloatArray, cands: IntArray) -> FloatArray:
+    """ICRS -> body rotations ``(K, 3, 3)`` mapping each catalogue triple onto the observed
+    triangle (TRIAD on its first two stars, vectorised)."""
+
+    def frames(a: FloatArray, b: FloatArray) -> FloatArray:
+        t1 = a / np.linalg.norm(a, axis=-1, keepdims=True)
+        t2 = cross(a, b)
+        t2 /= np.linalg.norm(t2, axis=-1, keepdims=True)
+        return np.stack([t1, t2, cross(t1, t2)], axis=-1)  # columns t1, t2, t3
+
+    o = frames(obs_vec[0][None, :], obs_vec[1][None, :])[0]
+    c = frames(stars[cands[:, 0]], stars[cands[:, 1]])
+    return np.einsum("ij,kmj->kim", o, c)  # R = O C^T
+
+
+def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,
+                 obs_idx: IntArray, *, max_near: int = 96) -> tuple[IntArray, IntArray]:
+    """For each attitude ``rs[k]`` with its catalogue triple ``cands[k]`` matched to the
+    observed rows ``obs_idx``: how many catalogue stars it predicts inside an image (at least
+    one match radius from the edge) with no observed star within the match radius (stars the
+    camera should have seen), and how many of the other observed stars it explains (a
+    predicted star within the match radius). Looks at the ``max_near`` catalogue stars nearest
+    each boresight; one compiled call per camera (:func:`field_check_kernel`)."""
+    obs = verifier.obs
+    stars = np.ascontiguousarray(verifier.db.stars.vec, dtype=np.float64)
+    g = field_grid(verifier.db)
+    unseen = np.zeros(len(rs), dtype=np.int64)
+    explained = np.zeros(len(rs), dtype=np.int64)
+    if len(rs) == 0:
+        return unseen, explained
+    rs = np.ascontiguousarray(rs, dtype=np.float64)
+    cands = np.ascontiguousarray(cands, dtype=np.int64)
+    cams, dist = _camera_rows(tuple(obs.cameras))
+    for c, cam in enumerate(obs.cameras):
+        half = math.radians(cam.diagonal_fov_deg / 2 + 0.2)
+        rows = np.setdiff1d(obs.by_camera[c], obs_idx)
+        u, e = field_check_kernel(rs, cands, np.ascontiguousarray(obs.mountings[c], dtype=np.float64), cams[c],
+                                  dist[c], stars, 2 * math.sin(half / 2), g.cell, g.n_side, g.keys, g.starts,
+                                  g.stars, g.columns, max_near, np.ascontiguousarray(obs.xy[rows]),
+                                  float(verifier.match_radius_px))
+        unseen += u
+        explained += e
+    return unseen, explained
+
+
+@njit(cache=True, nogil=True)
+def field_check_kernel(rs: np.ndarray, cands: np.ndarray, mount: np.ndarray, cam: np.ndarray, dist: np.ndarray,
+                       star_vec: np.ndarray, chord: float, cell: float, n_side: int, keys: np.ndarray,
+                       starts: np.ndarray, stars: np.ndarray, columns: np.ndarray, max_near: int,
+                       obs_xy: np.ndarray, radius_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(unseen, explained)`` per attitude ``rs[k]`` (ICRS -> body) with its catalogue triple
+    ``cands[k]``, for one camera (``mount`` body -> camera, ``cam`` = ``f, cx, cy, w, h``,
+    ``dist`` = Brown-Conrady ``k1, k2, p1, p2, k3``). The field: the ``max_near`` catalogue stars
+    nearest the boresight within ``chord``, less the triple's own; ``obs_xy`` the observed stars
+    other than the matched ones (px)."""
+    n_k = len(rs)
+    unseen = np.zeros(n_k, np.int64)
+    explained = np.zeros(n_k, np.int64)
+    buf = np.empty(len(star_vec), np.int64)
+    w, h = cam[3], cam[4]
+    rad2 = radius_px * radius_px
+    n_obs = len(obs_xy)
+    hit = np.zeros(n_obs, np.bool_)
+    r_cam = np.empty((3, 3))
+    for k in range(n_k):
+        for a in range(3):
+            for b in range(3):
+                r_cam[a, b] = mount[a, 0] * rs[k, 0, b] + mount[a, 1] * rs[k, 1, b] + mount[a, 2] * rs[k, 2, b]
+        bx, by, bz = r_cam[2, 0], r_cam[2, 1], r_cam[2, 2]
+        n = collect_within(bx, by, bz, chord, cell, n_side, keys, starts, stars, star_vec, columns, buf)
+        near = buf[:n]
+        if n > max_near:  # the nearest max_near, as the k-d tree's k nearest
+            d2 = np.empty(n)
+            for i in range(n):
+                v = star_vec[near[i]]
+                d2[i] = (v[0] - bx) ** 2 + (v[1] - by) ** 2 + (v[2] - bz) ** 2
+            near = near[np.argsort(d2)[:max_near]]
+        hit[:] = False
+        for i in range(len(near)):
+            row = near[i]
+            if row == cands[k, 0] or row == cands[k, 1] or row == cands[k, 2]:
+                continue
+            inside, x, y = project_to_pixel(r_cam, star_vec[row], cam, dist)
+            if not inside:
+                continue
+            seen = False
+            for j in range(n_obs):
+                dx = x - obs_xy[j, 0]
+                dy = y - obs_xy[j, 1]
+                if dx * dx + dy * dy <= rad2:
+                    seen = True
+                    hit[j] = True
+            edge = x >= -0.5 + radius_px and x <= w - 0.5 - radius_px and y >= -0.5 + radius_px \
+                and y <= h - 0.5 - radius_px
+            if edge and not seen:
+                unseen[k] += 1
+        for j in range(n_obs):
+            if hit[j]:
+                explained[k] += 1
+    return unseen, explained
+
+
+__all__ = ["SPARSE_CONFIDENCE", "SPARSE_MAX_SAMPLE", "check_unique_triangle", "field_check_kernel"]

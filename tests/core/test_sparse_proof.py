@@ -1,0 +1,75 @@
+"""The sparse proof's compiled field test counts what the vectorised k-d tree version counted."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from service.core.attitude import quat_to_matrix
+from service.core.navdb import NavDatabase
+from service.core.pipeline import _observation
+from service.core.sim import SimConfig, simulate_frames
+from service.core.sparse_proof import _field_check
+from service.core.verify import Verifier, star_tree
+from tests.conftest import SEED000_CAMERA
+
+
+def _field_check_numpy(verifier: Verifier, rs, cands, obs_idx, max_near: int = 96):
+    """The vectorised version this module replaced (k-d tree, K x max_near arrays)."""
+    obs = verifier.obs
+    stars = verifier.db.stars.vec
+    tree = star_tree(verifier.db)
+    rad = verifier.match_radius_px
+    unseen = np.zeros(len(rs), dtype=np.int64)
+    explained = np.zeros(len(rs), dtype=np.int64)
+    for c, cam in enumerate(obs.cameras):
+        r_cam = np.einsum("ij,kjl->kil", obs.mountings[c], rs)
+        half = math.radians(cam.diagonal_fov_deg / 2 + 0.2)
+        kk = min(max_near, len(stars))
+        _, near = tree.query(r_cam[:, 2, :], k=kk, distance_upper_bound=2 * math.sin(half / 2))
+        near = np.asarray(near).reshape(len(rs), kk)
+        valid = near < len(stars)
+        valid &= ~(near[:, :, None] == cands[:, None, :]).any(axis=2)
+        k_of = np.nonzero(valid)[0]
+        star = near[valid]
+        v_cam = np.einsum("nij,nj->ni", r_cam[k_of], stars[star])
+        pxy, inside = cam.vector_to_pixel(v_cam)
+        k_all, p_all = k_of[inside], pxy[inside]
+        rows = np.setdiff1d(obs.by_camera[c], obs_idx)
+        edge = cam.contains(p_all, margin_px=rad)
+        if len(rows) and len(p_all):
+            close = ((p_all[:, None, :] - obs.xy[rows][None, :, :]) ** 2).sum(axis=2) <= rad * rad
+            seen = close.any(axis=1)
+            kr = np.unique((k_all[:, None] * len(rows) + np.arange(len(rows))[None, :])[close])
+            explained += np.bincount(kr // len(rows), minlength=len(rs))
+        else:
+            seen = np.zeros(len(p_all), bool)
+        unseen += np.bincount(k_all[edge & ~seen], minlength=len(rs))
+    return unseen, explained
+
+
+def test_compiled_field_check_counts_as_the_kd_tree_version(seed000_db: NavDatabase) -> None:
+    # attitudes near each frame's truth (stars seen, explained, missed at the edges) and anywhere
+    # on the sky, with random catalogue triples left out of the field
+    frames = simulate_frames(SEED000_CAMERA, 6, SimConfig(mag_limit=6.5, centroid_noise_px=0.5, false_stars=2), rng=3)
+    rng = np.random.default_rng(8)
+    n_stars = len(seed000_db.stars.vec)
+    total = 0
+    for frame in frames:
+        obs = _observation([(frame.centroids, SEED000_CAMERA, None)], [np.eye(3)])
+        verifier = Verifier(seed000_db, obs, match_radius_px=3.0)
+        truth = quat_to_matrix(np.asarray(frame.quaternion))
+        tilts = [quat_to_matrix(np.r_[1.0, rng.normal(0, s, 3)]) for s in [0.0] * 3 + [1e-4] * 20 + [2e-3] * 20]
+        near = np.stack([t @ truth for t in tilts])
+        anywhere = quat_to_matrix(rng.normal(size=(40, 4)))
+        rs = np.concatenate([near, anywhere])
+        cands = rng.integers(0, n_stars, (len(rs), 3))
+        obs_idx = np.arange(3)
+        for max_near in (96, 8):  # 8: fewer than the field holds (the nearest are kept)
+            got = _field_check(verifier, rs, cands, obs_idx, max_near=max_near)
+            want = _field_check_numpy(verifier, rs, cands, obs_idx, max_near=max_near)
+            np.testing.assert_array_equal(got[0], want[0])
+            np.testing.assert_array_equal(got[1], want[1])
+        total += int(want[1][:3].sum())
+    assert total > 0  # the true attitudes explain observed stars

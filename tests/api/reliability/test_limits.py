@@ -122,6 +122,27 @@ def test_slowloris_headers_are_cut_off(small: Served) -> None:
             assert sent < len(request) and seconds < 8  # 1 s, with room for a busy machine
 
 
+def test_a_client_still_sending_when_the_limit_fires_reads_its_408(small: Served) -> None:
+    # headers that never end, a byte every 20 ms: bytes are still arriving when the server gives
+    # up; a plain close would answer them with a reset that can destroy the 408 (seen in CI)
+    host, port = small.url.removeprefix("http://").split(":")
+    for _ in range(3):
+        with socket.create_connection((host, int(port))) as s:
+            s.sendall(b"GET /v1/health HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Pad: ")
+            t0, answer = time.monotonic(), b""
+            while time.monotonic() - t0 < 6:
+                try:
+                    s.send(b"a")
+                except OSError:
+                    pass  # our side was shut: the answer is what matters
+                if select.select([s], [], [], 0.02)[0]:
+                    while chunk := s.recv(4096):
+                        answer += chunk
+                    break
+            assert answer.startswith(b"HTTP/1.1 408 "), answer
+            assert json.loads(answer.split(b"\r\n\r\n", 1)[1])["field"] == "headers"
+
+
 def wait_idle(served: Served, timeout_s: float = 15) -> None:
     """Until the server has no request or stream in progress (those of earlier tests end)."""
     deadline = time.monotonic() + timeout_s

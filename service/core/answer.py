@@ -19,17 +19,16 @@ import math
 import numpy as np
 from numba import njit
 
-from .attitude import wahba_svd
 from .camera import project_to_pixel
 from .blends import MIN_DELTA_MAG, dominant_kernel
-from .methods.quad_kernel import verify_pairs
+from .methods.quad_kernel import recheck_pairs
 from .navdb.reader import NavDatabase
 from .photometry import (FAINT_GATE_MAG, MIN_PAIRS, THRESHOLD_MAG, completeness_kernel, faintest_inverted_kernel,
                          too_bright_kernel)
 from .residuals import distant_kernel
 from .skygrid import collect_within
 from .types import IntArray
-from .verify import NEAR_MARGIN_DEG, field_grid
+from .verify import NEAR_MARGIN_DEG, field_grid, star_vec64
 
 FIELD_MARGIN_DEG = 0.1
 """The field's stars are gathered this far beyond the image's half-diagonal."""
@@ -56,7 +55,7 @@ def compiled_checks(obs, db: NavDatabase, m_obs: IntArray, m_cat: IntArray, r: n
     chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + FIELD_MARGIN_DEG) / 2)
     flux = obs.flux if obs.flux is not None else np.zeros(0)
     o, c, moved = answer_kernel(obs.xy, flux, obs.flux is not None, m_obs, m_cat, np.ascontiguousarray(r),
-                                np.ascontiguousarray(db.stars.vec, dtype=np.float64), star_mags(db),
+                                star_vec64(db), star_mags(db),
                                 g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, chord, k.mounts[0],
                                 k.cams[0], k.dist[0], float(radius_px), float(sigma_px))
     return o, c, moved
@@ -72,16 +71,12 @@ def recheck(obs, db: NavDatabase, obs_idx: IntArray, cat_idx: IntArray, n_trials
     cam = obs.cameras[0]
     k = obs.kernel_arrays
     g = field_grid(db)
-    star_vec = np.ascontiguousarray(db.stars.vec, dtype=np.float64)
-    obs_idx = np.ascontiguousarray(obs_idx, dtype=np.int64)
-    cat_idx = np.ascontiguousarray(cat_idx, dtype=np.int64)
     near_chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG) / 2)
-    r = wahba_svd(obs.vec[obs_idx], star_vec[cat_idx])
-    ok, m_obs, m_cat, r, prob = verify_pairs(
-        obs.vec, obs.xy, star_vec, obs_idx, cat_idx, np.ascontiguousarray(r), g.cell, g.n_side, g.keys, g.starts,
-        g.stars, g.columns, near_chord, k.mounts[0], np.empty(len(star_vec), np.int64), np.zeros(4), k.mounts,
-        k.cams, k.dist, k.rows, k.row_off, float(radius_px),
-        1.5 * radius_px * obs.pixel_scale_rad, int(n_trials))
+    ok, m_obs, m_cat, r, prob = recheck_pairs(
+        obs.vec, obs.xy, star_vec64(db), np.ascontiguousarray(obs_idx, dtype=np.int64),
+        np.ascontiguousarray(cat_idx, dtype=np.int64), g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns,
+        near_chord, k.mounts, k.cams, k.dist, k.rows, k.row_off, float(radius_px), float(obs.pixel_scale_rad),
+        int(n_trials))
     return bool(ok), m_obs, m_cat, r, float(prob)
 
 

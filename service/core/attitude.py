@@ -158,6 +158,25 @@ def _fit_stats(obs: np.ndarray, ref: np.ndarray, r: np.ndarray,
     return res, rms, sd
 
 
+@njit(cache=True, nogil=True)
+def pooled_sigma(residuals_arcsec: np.ndarray, sd: np.ndarray, prior_sigma_rad: float,
+                 prior_dof: float) -> np.ndarray:
+    """``sd`` (the 1-sigma from the residuals alone) rescaled to the pooled per-axis error: the
+    residuals' ``sum |res|^2`` over ``2n - 3`` degrees of freedom, joined by the declared error
+    ``prior_sigma_rad`` as ``prior_dof`` more (see :func:`estimate`)."""
+    n = len(residuals_arcsec)
+    if prior_dof <= 0 or n == 0:
+        return sd
+    ss = 0.0
+    for x in residuals_arcsec:
+        ss += x * x
+    ss /= ARCSEC_PER_RAD * ARCSEC_PER_RAD
+    dof = max(2 * n - 3, 1)
+    from_residuals = max(math.sqrt(ss / dof), 1e-7)
+    pooled = math.sqrt((ss + prior_dof * prior_sigma_rad * prior_sigma_rad) / (dof + prior_dof))
+    return sd * (pooled / from_residuals)
+
+
 def wahba_svd(obs: FloatArray, ref: FloatArray, weights: FloatArray | None = None) -> FloatArray:
     """Rotation ``R`` (3, 3) minimising ``sum w_i |obs_i - R ref_i|^2`` (Markley's SVD method).
 
@@ -316,11 +335,7 @@ def estimate(
     r = wahba_svd(obs, ref) if matrix is None else np.asarray(matrix, dtype=np.float64)
     res, rms, sd = _fit_stats(np.ascontiguousarray(obs, dtype=np.float64), np.ascontiguousarray(ref, dtype=np.float64),
                               np.ascontiguousarray(r), -1.0 if sigma_rad is None else float(sigma_rad))
-    if sigma_rad is None and prior_sigma_rad is not None and prior_dof > 0 and len(res):
-        ss = float(res @ res) / ARCSEC_PER_RAD**2
-        dof = max(2 * len(res) - 3, 1)
-        from_residuals = max(math.sqrt(ss / dof), 1e-7)
-        pooled = math.sqrt((ss + prior_dof * prior_sigma_rad**2) / (dof + prior_dof))
-        sd = sd * (pooled / from_residuals)
+    if sigma_rad is None and prior_sigma_rad is not None:
+        sd = pooled_sigma(res, sd, float(prior_sigma_rad), float(prior_dof))
     sd = (float(sd[0]), float(sd[1]), float(sd[2]))
     return AttitudeEstimate(r, matrix_to_quat(r), res, float(rms), sd)  # type: ignore[arg-type]

@@ -29,13 +29,13 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from .answer import FIELD_MARGIN_DEG, answer_kernel, field_grid, star_mags
-from .attitude import ARCSEC_PER_RAD, PRIOR_DOF, _fit_stats, wahba_kernel
+from .answer import FIELD_MARGIN_DEG, answer_kernel, star_mags
+from .attitude import PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
 from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
-from .methods.quad_kernel import STATUS_FOUND, quad_search, verify_pairs
+from .methods.quad_kernel import STATUS_FOUND, quad_search, recheck_pairs
 from .navdb.reader import NavDatabase
-from .verify import NEAR_MARGIN_DEG, Observation, Verifier
+from .verify import NEAR_MARGIN_DEG, Observation, Verifier, field_grid, star_vec64
 
 
 @dataclass(frozen=True)
@@ -71,17 +71,9 @@ def deeper_arrays(shallow: NavDatabase, deep: NavDatabase) -> Deeper:
         rows = order[pos]
         rows = np.where(hip_d[rows] == hip_s, rows, -1).astype(np.int64)
         g = field_grid(deep)
-        got = cache[key] = (deep, Deeper(rows, _star_vec(deep), (g.cell, g.n_side, g.keys, g.starts, g.stars,
-                                                                     g.columns)))
+        got = cache[key] = (deep, Deeper(rows, star_vec64(deep), (g.cell, g.n_side, g.keys, g.starts, g.stars,
+                                                                      g.columns)))
     return got[1]
-
-
-def _star_vec(db: NavDatabase) -> np.ndarray:
-    """The star vectors as contiguous float64 (once per opened database)."""
-    cache = db.__dict__.setdefault("_cache", {})
-    if "vec64" not in cache:
-        cache["vec64"] = np.ascontiguousarray(db.stars.vec, dtype=np.float64)
-    return cache["vec64"]
 
 
 @dataclass(frozen=True)
@@ -167,8 +159,8 @@ _NO_DEEPER = Deeper(np.zeros(0, np.int64), np.zeros((0, 3)),
 @njit(cache=True, nogil=True)
 def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, n_use, tol, patterns, table,
                       ratio_bin, edge_bin, edge_max, star_vec, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
-                      g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, radius_px, pixel_scale, max_false_prob, strong_false_prob,
-                      confirm_patterns, screen_stars, max_probes, max_checks,
+                      g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, radius_px, pixel_scale,
+                      max_false_prob, strong_false_prob, confirm_patterns, screen_stars, max_probes, max_checks,
                       has_deep, deep_rows, d_vec, d_cell, d_side, d_keys, d_starts, d_stars, d_columns, strong,
                       a_cell, a_side, a_keys, a_starts, a_stars, a_columns, mag, d_mag, field_chord,
                       answer_radius, sigma_px, sigma_rad, prior_dof):
@@ -199,11 +191,9 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
                     k_obs[j] = m_obs[i]
                     k_cat[j] = deep_rows[m_cat[i]]
                     j += 1
-            r0 = wahba_kernel(obs_vec[k_obs], d_vec[k_cat], np.ones(n_known))
-            ok, d_obs, d_cat, d_r, d_prob = verify_pairs(
-                obs_vec, obs_xy, d_vec, k_obs, k_cat, r0, d_cell, d_side, d_keys, d_starts, d_stars, d_columns,
-                near_chord, mounts[0], np.empty(len(d_vec), np.int64), np.zeros(4), mounts, cams, dist, rows, row_off,
-                radius_px, 1.5 * radius_px * pixel_scale, trials)
+            ok, d_obs, d_cat, d_r, d_prob = recheck_pairs(
+                obs_vec, obs_xy, d_vec, k_obs, k_cat, d_cell, d_side, d_keys, d_starts, d_stars, d_columns,
+                near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale, trials)
             if ok and d_prob <= strong and len(d_obs) > len(m_obs):
                 m_obs, m_cat, r, prob, used_deep = d_obs, d_cat, d_r, d_prob, True
                 vec, cell, side, keys, starts, stars, columns, mags = d_vec, d_cell, d_side, d_keys, d_starts, \
@@ -216,14 +206,4 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
     if moved:
         r = wahba_kernel(o, ref, np.ones(len(m_obs)))
     res, rms, sd = _fit_stats(o, ref, r, -1.0)
-    n = len(res)
-    if prior_dof > 0 and n:  # attitude.estimate's pooled sigma
-        ss = 0.0
-        for x in res:
-            ss += x * x
-        ss /= ARCSEC_PER_RAD * ARCSEC_PER_RAD
-        dof = max(2 * n - 3, 1)
-        from_residuals = max(math.sqrt(ss / dof), 1e-7)
-        pooled = math.sqrt((ss + prior_dof * sigma_rad * sigma_rad) / (dof + prior_dof))
-        sd = sd * (pooled / from_residuals)
-    return search, True, used_deep, m_obs, m_cat, r, prob, res, rms, sd
+    return search, True, used_deep, m_obs, m_cat, r, prob, res, rms, pooled_sigma(res, sd, sigma_rad, prior_dof)

@@ -21,7 +21,7 @@ from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
 from .blends import dominant_pairs
 from .camera import Camera
 from .errors import InvalidInputError, UnknownMethodError
-from .first_pass import first_pass
+from .first_pass import deeper_arrays, first_pass
 from .methods import SolveContext, get_matcher, get_method, resolve
 from .methods.quad import QUERY_STARS
 from .navdb.reader import NavDatabase, NavDatabaseSet
@@ -170,8 +170,9 @@ def solve_rig(
     sigmas = [options.centroid_sigma_px]
     if options.retry_sigma_factor > 1:
         sigmas.append(options.centroid_sigma_px * options.retry_sigma_factor)
-    if (COMPILED_FIRST_PASS and hint is None and options.epoch is None and options.observer_velocity_km_s is None and len(obs.cameras) == 1
-            and len(obs) >= 5 and plan and plan[0][1][:1] == ["quad"]):
+    plain = hint is None and options.epoch is None and options.observer_velocity_km_s is None
+    quad_first = bool(plan) and plan[0][1][:1] == ["quad"]
+    if COMPILED_FIRST_PASS and plain and quad_first and len(obs.cameras) == 1 and len(obs) >= 5:
         # auto's first pass in one compiled call (service.core.first_pass); a frame it does not
         # prove goes on below with the search's result in hand (QuadMatcher takes it up)
         fp = first_pass(obs, plan[0][0], deepest, sigmas[0], options.match_radius_px, options.max_false_prob)
@@ -179,12 +180,8 @@ def solve_rig(
             t2 = time.perf_counter()
             timings["identify"] = (t2 - t1) * 1e3
             sol = answer(obs, fp.db, fp.obs_rows, fp.cat_rows, np.asarray(fp.db.stars.vec[fp.cat_rows]), fp.matrix,
-                          fp.residuals_arcsec, fp.rms_arcsec, fp.sigma_arcsec, fp.false_prob, "quad")
-            object.__setattr__(sol, "methods_tried", ("quad",))
-            timings["attitude"] = (time.perf_counter() - t2) * 1e3
-            timings["total"] = (time.perf_counter() - t0) * 1e3
-            object.__setattr__(sol, "timings_ms", timings)
-            return sol
+                         fp.residuals_arcsec, fp.rms_arcsec, fp.sigma_arcsec, fp.false_prob, "quad")
+            return _stamped(sol, ["quad"], timings, t0, t2)
         obs.__dict__["_quad_prefetch"] = (plan[0][0], fp.search)
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
     # the coincidence bound is multiplied by
@@ -214,7 +211,12 @@ def solve_rig(
         refined = _refine(obs, db, deepest, found, sigma, options)
         if refined is not None:
             db, found = deepest, refined
-    sol = _solution(obs, db, found, used, sigma * obs.pixel_scale_rad, options)
+    return _stamped(_solution(obs, db, found, used, sigma * obs.pixel_scale_rad, options), tried, timings, t0, t2)
+
+
+def _stamped(sol: Solution, tried: list[str], timings: dict[str, float], t0: float, t2: float) -> Solution:
+    """``sol`` with the methods that ran and the stage times (ms; building the answer began
+    at ``t2``, the frame at ``t0``)."""
     object.__setattr__(sol, "methods_tried", tuple(dict.fromkeys(tried)))
     timings["attitude"] = (time.perf_counter() - t2) * 1e3
     timings["total"] = (time.perf_counter() - t0) * 1e3
@@ -281,16 +283,8 @@ def _refine(
     """Re-verify an answer found in ``db`` against the deeper star table of ``deeper``: its
     stars that ``deeper`` also holds are the hypothesis, the newly matched ones the evidence,
     and every hypothesis already tried still counts. None if it adds nothing provable."""
-    hips = np.asarray(db.stars.hip[found.cat])
-    deep_hip = np.asarray(deeper.stars.hip)
-    cached = deeper.__dict__.get("_hip_order")
-    if cached is None:  # once per opened database (sorting 25,000 HIPs costs ~1.5 ms a frame)
-        order = np.argsort(deep_hip)
-        cached = deeper.__dict__["_hip_order"] = (order, deep_hip[order])
-    order, sorted_hip = cached  # searching the sorted copy: ~50x faster than with `sorter=`
-    pos = np.minimum(np.searchsorted(sorted_hip, hips), len(deep_hip) - 1)
-    rows = order[pos]
-    known = deep_hip[rows] == hips
+    rows = deeper_arrays(db, deeper).rows[found.cat]  # by HIP, the map built once per pair of members
+    known = rows >= 0
     if known.sum() < 3:
         return None
     radius = options.match_radius_px or max(2.5, 3.0 * sigma)

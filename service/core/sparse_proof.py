@@ -25,7 +25,7 @@ from .geometry import cross, pairwise_angles
 from .match import _camera_rows
 from .skygrid import collect_within
 from .types import FloatArray, IntArray
-from .verify import Verified, Verifier, field_grid
+from .verify import Verified, Verifier, field_grid, star_vec64
 
 SPARSE_CONFIDENCE = 0.95
 """Confidence of the Poisson upper bound on the local density of consistent triangles."""
@@ -121,7 +121,7 @@ def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,
     predicted star within the match radius). Looks at the ``max_near`` catalogue stars nearest
     each boresight; one compiled call per camera (:func:`field_check_kernel`)."""
     obs = verifier.obs
-    stars = np.ascontiguousarray(verifier.db.stars.vec, dtype=np.float64)
+    stars = star_vec64(verifier.db)
     g = field_grid(verifier.db)
     unseen = np.zeros(len(rs), dtype=np.int64)
     explained = np.zeros(len(rs), dtype=np.int64)

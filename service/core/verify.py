@@ -410,3 +410,12 @@ def field_grid(db: NavDatabase) -> SkyGrid:
     if "field_grid" not in cache:
         cache["field_grid"] = build_sky_grid(np.asarray(db.stars.vec), cell_rad=math.radians(FIELD_CELL_DEG))
     return cache["field_grid"]
+
+
+def star_vec64(db: NavDatabase) -> np.ndarray:
+    """The star vectors as contiguous float64, as the kernels take them (once per opened
+    database)."""
+    cache = db.__dict__.setdefault("_cache", {})
+    if "vec64" not in cache:
+        cache["vec64"] = np.ascontiguousarray(db.stars.vec, dtype=np.float64)
+    return cache["vec64"]

@@ -123,3 +123,11 @@ def test_bench_batch_smoke(tmp_path: Path, maxangle_db: Path, capsys: pytest.Cap
     assert "| 2 |" in out and "identified" in out and "0 wrong" in out
     (run,) = json.loads((tmp_path / "bench_batch.json").read_text())["results"]
     assert run["workers"] == 2 and run["frames"] == 12 and run["fps_solving"] > 0
+
+
+def test_profile_stages_smoke(default_set_db, capsys: pytest.CaptureFixture[str]) -> None:
+    from bench import profile_stages
+
+    profile_stages.main(["--camera", "seed003", "--repeat", "20"])
+    out = capsys.readouterr().out
+    assert "| compiled first pass |" in out and "| whole solve |" in out

@@ -169,13 +169,13 @@ def _slot(key: int, mask: int) -> int:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _in_set(table: np.ndarray, mask: int, key: int) -> bool:
+def _find(table: np.ndarray, mask: int, key: int) -> int:
+    """The slot of ``key`` in an open-addressing set of positive keys (0: empty), or the empty
+    slot where it would go."""
     h = _slot(key, mask)
-    while table[h] != 0:
-        if table[h] == key:
-            return True
+    while table[h] != 0 and table[h] != key:
         h = (h + 1) & mask
-    return False
+    return h
 
 
 @njit(cache=True, nogil=True)
@@ -219,10 +219,7 @@ def join_windows(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_ik: int, 
     for r in range(s_jk, e_jk):
         for o in range(2):
             key = pairs[r, o] * n_stars + pairs[r, 1 - o] + 1
-            h = _slot(key, mask)
-            while table[h] != 0 and table[h] != key:
-                h = (h + 1) & mask
-            table[h] = key
+            table[_find(table, mask, key)] = key
     ab_start, ab_adj = _adjacency(pairs, s_ij, e_ij, n_stars)  # a-b, by a: the stable order by first star
     n = 0
     for sweep in range(2):  # count, then fill (no array reassigned inside the loop)
@@ -238,7 +235,7 @@ def join_windows(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_ik: int, 
             a, b = a_of, ab_adj[k]
             for q in range(start[a], start[a + 1]):
                 c = adj[q]
-                if c == b or not _in_set(table, mask, b * n_stars + c + 1):
+                if c == b or table[_find(table, mask, b * n_stars + c + 1)] == 0:
                     continue
                 if sweep == 1:
                     out[n, 0], out[n, 1], out[n, 2] = a, b, c

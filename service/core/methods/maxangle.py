@@ -190,7 +190,7 @@ class MaxAngleMatcher:
         self.d_max = math.radians(prm["d_max_deg"])
         self.xi = math.radians(prm["xi_deg"])
         self.vec = db.stars.vec
-        self.block_start = bucket_starts(np.asarray(self.key), self.n_blocks)
+        self.bucket_start = bucket_starts(np.asarray(self.key), self.n_blocks)
 
     def observed_triangles(self, d: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Usable triangles of the observed stars with pairwise angles ``d`` ``(n, n)``, best
@@ -215,7 +215,7 @@ class MaxAngleMatcher:
         ``which`` the index of the observed triangle of each row (ascending). With
         ``max_per_triangle > 0`` every candidate of a triangle matching more than that many
         catalogue triangles is dropped (it carries no information)."""
-        return _query(self.key, self.block_start, self.c, self.theta, self.ids, self.vec,
+        return _query(self.key, self.bucket_start, self.c, self.theta, self.ids, self.vec,
                       np.ascontiguousarray(obs_vec, dtype=np.float64),
                       np.ascontiguousarray(labels, dtype=np.int64),
                       np.ascontiguousarray(sides, dtype=np.float64),
@@ -298,30 +298,30 @@ def _slice(key: np.ndarray, starts: np.ndarray, blk: int, b: float, eps: float, 
 
 
 @njit(cache=True, nogil=True)
-def _query(key: np.ndarray, block_start: np.ndarray, c_tab: np.ndarray, th_tab: np.ndarray, ids: np.ndarray,
-           star_vec: np.ndarray, obs_vec: np.ndarray, labels: np.ndarray, sides: np.ndarray, theta: np.ndarray, tol: np.ndarray,
+def _query(key: np.ndarray, bucket_start: np.ndarray, c_tab: np.ndarray, th_tab: np.ndarray, ids: np.ndarray,
+           star_vec: np.ndarray, obs_vec: np.ndarray, labels: np.ndarray, sides: np.ndarray, theta: np.ndarray,
+           tol: np.ndarray,
            eps: float, n_blocks: int, b_scale: float, max_per_triangle: int) -> tuple[np.ndarray, np.ndarray]:
     """Compiled query: the blocks covering ``theta +- tol``, the ``b +- eps`` slice of each
     (binary search on the composite key), then ``c``, ``theta`` and the longest side ``a``
     (from ``b``, ``c``, ``theta``) within tolerance, then handedness.
 
-    Each block's slice is found by binary search inside its ``b`` buckets (``block_start``,
-    :func:`bucket_starts`).
-    The output is sized once (no array is reassigned inside the scan, which would make numba
+    Each block's slice is found by binary search inside its ``b`` buckets (``bucket_start``:
+    :func:`bucket_starts`). The output is sized once (no array is reassigned inside the scan, which would make numba
     count references on every record), and a triangle's scan stops once it has more than
     ``max_per_triangle`` rows (they would all be dropped)."""
     n_tri = len(theta)
-    lo = np.empty((n_tri, 2), np.int64)
+    blocks = np.empty((n_tri, 2), np.int64)  # the theta blocks each triangle reads
     cap = 0
     for t in range(n_tri):
         th, tl = theta[t], tol[t]
-        lo[t, 0] = min(max(int(n_blocks * (th - tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
-        lo[t, 1] = min(max(int(n_blocks * (th + tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
+        blocks[t, 0] = min(max(int(n_blocks * (th - tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
+        blocks[t, 1] = min(max(int(n_blocks * (th + tl - THETA_LO) / THETA_SPAN), 0), n_blocks - 1)
         if max_per_triangle > 0:
             cap += max_per_triangle + 1
         else:  # unbounded: the slices' sizes
-            for blk in range(lo[t, 0], lo[t, 1] + 1):
-                cap += _slice(key, block_start, blk, sides[t, 1], eps, b_scale)[1]
+            for blk in range(blocks[t, 0], blocks[t, 1] + 1):
+                cap += _slice(key, bucket_start, blk, sides[t, 1], eps, b_scale)[1]
     rows = np.empty(cap, np.int64)
     which = np.empty(cap, np.int64)
     n_out = 0
@@ -331,8 +331,8 @@ def _query(key: np.ndarray, block_start: np.ndarray, c_tab: np.ndarray, th_tab: 
         th, tl = theta[t], tol[t]
         h_obs = triple_product(obs_vec[labels[t, 0]], obs_vec[labels[t, 1]], obs_vec[labels[t, 2]])
         full = False
-        for blk in range(lo[t, 0], lo[t, 1] + 1):
-            start, count = _slice(key, block_start, blk, b_obs, eps, b_scale)
+        for blk in range(blocks[t, 0], blocks[t, 1] + 1):
+            start, count = _slice(key, bucket_start, blk, b_obs, eps, b_scale)
             for r in range(start, start + count):
                 if abs(c_tab[r] - c_obs) > eps or abs(th_tab[r] - th) > tl:
                     continue

@@ -341,6 +341,18 @@ def verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g
 
 
 @njit(cache=True, nogil=True)
+def recheck_pairs(obs_vec, obs_xy, star_vec, obs_idx, cat_idx, g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
+                  near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale, trials):
+    """:func:`verify_pairs` of the pairs ``obs_idx`` -> ``cat_idx`` at their own Wahba attitude
+    (re-verifying an answer against another member's star table: ``star_vec`` and its grid).
+    Returns ``(ok, m_obs, m_cat, r, prob)``."""
+    r = wahba_kernel(obs_vec[obs_idx], star_vec[cat_idx], np.ones(len(obs_idx)))
+    return verify_pairs(obs_vec, obs_xy, star_vec, obs_idx, cat_idx, r, g_cell, g_side, g_keys, g_starts, g_stars,
+                        g_columns, near_chord, mounts[0], np.empty(len(star_vec), np.int64), np.zeros(4), mounts,
+                        cams, dist, rows, row_off, radius_px, 1.5 * radius_px * pixel_scale, trials)
+
+
+@njit(cache=True, nogil=True)
 def _field(r, mount, state, chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec, g_columns, buf):
     """The catalogue rows near the boresight under ``r`` (a view of ``buf``), reusing the last
     gathering while the boresight stays within 0.3 deg of it (the verifier's ``_near`` cache).

@@ -33,6 +33,13 @@ Where the paper is vague or weak, and what we chose (measured in docs/methods.md
   is the faithful reading.
 - **Triangle order.** Observed triangles with the fewest ``m1 m2 m3`` combinations first;
   candidates are scored lazily, star by star.
+- **Informative radius** (issue 16). A neighbour at distance ``r`` matches a catalogue star by
+  chance when any catalogue neighbour falls in its window ``2 eps + dr``; on a wide field with
+  coarse pixels the outer windows are all occupied (seed 004: ~4.5 catalogue stars expected in
+  a window at 25 deg) and no candidate can be significant (0% before this). Only neighbours
+  within :func:`informative_radius` (where the window's chance occupancy is below one half)
+  score, and a candidate's fill is counted over the rings inside it: the same rings out to a
+  smaller ``R``, as the paper's ``R`` is the frame's own largest distance.
 """
 
 from __future__ import annotations
@@ -63,7 +70,25 @@ expected to reach it by chance. The binomial estimate runs high: on 4- and 5-sta
 a bound of 64 dropped the true star (ranked 0-2) from 2 of 1996 such frames; at 256 none is
 lost, and ``MAX_CANDIDATES`` still caps the list."""
 MAX_NEIGHBOURS = 24
-"""Observed neighbours used in a star's feature (the brightest)."""
+"""Observed neighbours used in a star's feature: the nearest within :meth:`RadialMatcher.reach`
+(all the frame's stars are candidates: in a 20 deg field at 6.5 Mv the 24 brightest leave
+about 3 within the 3.9 deg that score)."""
+CHANCE_OCCUPANCY = 0.5
+"""A ring window whose chance of holding a catalogue neighbour is above this carries too little
+information to score (see :func:`informative_radius`)."""
+
+
+def informative_radius(n_stars: int, ring_rad: float, eps_rad: float, radius_rad: float) -> float:
+    """Radius (rad) out to which a ring window ``2 eps + dr`` around a star is more likely empty
+    than occupied by chance, for ``n_stars`` spread evenly over the sphere; at most ``radius_rad``.
+
+    The expected catalogue neighbours in the window at distance ``r`` are ``n / 2 sin(r) w``;
+    the window is occupied with chance ``1 - exp(-that)``, which reaches ``CHANCE_OCCUPANCY`` at
+    ``sin(r) = -2 ln(1 - CHANCE_OCCUPANCY) / (n w)``.
+    """
+    w = 2.0 * eps_rad + ring_rad
+    s = -2.0 * math.log(1.0 - CHANCE_OCCUPANCY) / max(n_stars * w, 1e-300)
+    return radius_rad if s >= 1.0 else min(math.asin(s), radius_rad)
 
 
 def ring_codes(pairs: np.ndarray, angles: np.ndarray, n_stars: int, ring_rad: float,
@@ -126,13 +151,31 @@ class RadialMatcher:
         self.score = score
         self.threshold = threshold
         self.min_fraction = min_fraction
-        self.fill = np.bitwise_count(np.asarray(self.codes)).sum(axis=0, dtype=np.int64) / self.n_rings
+        self._fills: dict[int, np.ndarray] = {}
+
+    def reach(self, eps: float) -> float:
+        """Largest neighbour distance (rad) that scores at tolerance ``eps``
+        (:func:`informative_radius`, kept one tolerance inside the stored radius)."""
+        return min(informative_radius(self.codes.shape[1], self.ring_rad, eps, self.radius), self.radius - eps)
+
+    def fill(self, n_rings: int) -> np.ndarray:
+        """Per catalogue star, the share of its first ``n_rings`` rings that are set (cached)."""
+        if n_rings not in self._fills:
+            n_rings = max(1, min(n_rings, self.n_rings))
+            full, part = divmod(n_rings, 64)
+            codes = np.asarray(self.codes)
+            count = np.bitwise_count(codes[:full]).sum(axis=0, dtype=np.int64)
+            if part:
+                count += np.bitwise_count(codes[full] & np.uint64((1 << part) - 1))
+            self._fills[n_rings] = count / n_rings
+        return self._fills[n_rings]
 
     # -- pre-identification ----------------------------------------------------------------
     def candidates(self, dist: np.ndarray, eps: float) -> np.ndarray:
         """Catalogue candidates (rows, best first) of an observed star whose neighbours lie at
         angular distances ``dist`` (radians)."""
-        dist = dist[dist < self.radius - eps]
+        reach = self.reach(eps)
+        dist = dist[dist < reach]
         if len(dist) == 0:
             return np.zeros(0, np.int64)
         if self.score == "paper":
@@ -149,9 +192,10 @@ class RadialMatcher:
             # its rings that are set; keep those expected to turn up by chance fewer than
             # MAX_EXPECTED_FALSE times in the whole catalogue
             rows = np.flatnonzero(score >= 2)
-            p = np.minimum(self.fill[rows] * window, 1.0)
+            fill = self.fill(math.ceil((reach + eps) / self.ring_rad))
+            p = np.minimum(fill[rows] * window, 1.0)
             pval = bdtrc(score[rows] - 1, n_feat, p)
-            keep = pval * len(self.fill) <= MAX_EXPECTED_FALSE
+            keep = pval * len(fill) <= MAX_EXPECTED_FALSE
             rows, rank = rows[keep], pval[keep]
         order = np.argsort(rank, kind="stable")[:MAX_CANDIDATES]
         return rows[order].astype(np.int64)
@@ -188,16 +232,14 @@ class RadialMatcher:
         n = min(len(obs), ctx.max_stars)
         if n < 3:
             return None
-        n_nb = min(len(obs), MAX_NEIGHBOURS)
-        v_all = obs.vec[:n_nb]
-        d_all = pairwise_angles(v_all)
+        d_all = pairwise_angles(obs.vec)
         d = d_all[:n, :n]
         eps = ctx.tol_rad
         cands: dict[int, np.ndarray] = {}
 
         def cand(i: int) -> np.ndarray:
             if i not in cands:
-                others = np.delete(d_all[i], i)
+                others = np.sort(np.delete(d_all[i], i))[:MAX_NEIGHBOURS]
                 cands[i] = self.candidates(others, eps)
             return cands[i]
 

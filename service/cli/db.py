@@ -28,8 +28,9 @@ def build(
 ) -> None:
     """Build a database from the bundled Hipparcos catalogue."""
     from ..core.errors import SkyfixError
-    from ..core.methods import get_method
-    from ..core.navdb import BuildConfig, build_database, current_epoch
+    from ..core.methods import AUTO_ORDER, get_method
+    from ..core.methods.capability import build_warnings
+    from ..core.navdb import BuildConfig, build_database, current_epoch, open_database
 
     names = tuple(m.strip() for m in methods.split(",") if m.strip())
     try:
@@ -50,6 +51,8 @@ def build(
     with build_progress(str(out)) as cb:
         build_database(out, cfg, progress=cb)
     err_console.print(f"built {out} in {time.perf_counter() - t0:.1f} s, peak memory {peak_memory()}")
+    for line in build_warnings(open_database(out), AUTO_ORDER):  # methods that cannot serve its fields
+        err_console.print(f"[yellow]warning:[/yellow] {line}", highlight=False)
 
 
 @app.command()

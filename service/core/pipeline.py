@@ -155,7 +155,7 @@ def solve_rig(
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     plan, deepest = _search_plan(db, [cam for _, cam, _ in frames], method, options.centroid_sigma_px)
-    refused = refusal(frames, db, method, t0)
+    refused = refusal(frames, db, method, t0, options.centroid_sigma_px)
     if refused is not None:
         return refused
     _ensure_warm(db)  # one-off per opened database; not charged to this frame's time limit

@@ -8,6 +8,8 @@ import time
 from collections.abc import Sequence
 
 from .camera import Camera
+from .methods import AUTO_ORDER
+from .methods.capability import cannot_serve, refusal_message, serving
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .types import Centroids, NoSolutionReason, Solution, SolveStatus
 
@@ -21,10 +23,11 @@ deg at V 9: 0/30; 60 deg at V 5: 0/30, each taking 3-700 ms to say so)."""
 
 
 def refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavDatabase | NavDatabaseSet,
-            method: str, t0: float) -> Solution | None:
+            method: str, t0: float, sigma_px: float | None = None) -> Solution | None:
     """A ``no_solution`` for a frame no method can solve, decided before any warm-up or search
-    (a few microseconds): fewer than 3 stars, or a camera outside every member's range (see
-    ``OUTSIDE_FACTOR``). None if the frame is worth searching."""
+    (a few microseconds): fewer than 3 stars, a camera outside every member's range (see
+    ``OUTSIDE_FACTOR``), or, given the declared centroid error ``sigma_px``, a named method
+    that cannot serve the camera (:func:`method_refusal`). None if the frame is worth searching."""
     n = sum(len(c) for c, _, _ in frames)
     if n < 3:
         return _refused(NoSolutionReason.TOO_FEW_STARS, method, t0,
@@ -37,11 +40,34 @@ def refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavDatabase 
         ranges = [(float(m.manifest["fov_min_deg"]), float(m.manifest["fov_max_deg"])) for m in members]
         db.__dict__["_fov_ranges"] = ranges
     if any(narrowest >= lo / OUTSIDE_FACTOR and diagonal <= hi * OUTSIDE_FACTOR for lo, hi in ranges):
-        return None
+        why = None if sigma_px is None else method_refusal([cam for _, cam, _ in frames], db, method, sigma_px)
+        return None if why is None else _refused(NoSolutionReason.CAMERA_OUTSIDE_DATABASE, method, t0, why)
     served = ", ".join(f"{lo:g}-{hi:g}" for lo, hi in ranges)
     why = (f"camera of {narrowest:.3g} deg side and {diagonal:.3g} deg diagonal is outside the database's range "
            f"(side >= fov_min, diagonal <= fov_max: {served} deg)")
     return _refused(NoSolutionReason.CAMERA_OUTSIDE_DATABASE, method, t0, f"{why}; {_build_hint(narrowest, diagonal)}")
+
+
+def method_refusal(cameras: Sequence[Camera], db: NavDatabase | NavDatabaseSet, method: str,
+                   sigma_px: float) -> str | None:
+    """Why the named ``method`` cannot serve ``cameras`` on any member of ``db`` that holds it
+    (:mod:`.methods.capability`; a rig is served when one camera is), naming the methods that
+    can; None if it can, or for ``auto``. Kept per opened database and camera geometry."""
+    if method == "auto":
+        return None
+    key = (method, sigma_px, tuple((c.width, c.height, c.f_px) for c in cameras))
+    cache = db.__dict__.setdefault("_method_refusals", {})
+    if key not in cache:
+        members = list(db.members.values()) if isinstance(db, NavDatabaseSet) else [db]
+        holding = [m for m in members if method in m.tables]
+        whys = [cannot_serve(m, method, c, sigma_px) for m in holding for c in cameras]
+        if not holding or any(w is None for w in whys):
+            cache[key] = None
+        else:
+            alternatives = [a for m in holding for a in serving(m, cameras, sigma_px, AUTO_ORDER)]
+            where = f"this camera ({cameras[0].fov_deg:.3g} deg) on this database"
+            cache[key] = refusal_message(method, str(whys[0]), where, list(dict.fromkeys(alternatives)))
+    return cache[key]
 
 
 def _build_hint(side: float, diagonal: float) -> str:
@@ -77,4 +103,4 @@ def no_solution(method: str, tried: list[str], trials: int, late: bool,
                     timings_ms=timings)
 
 
-__all__ = ["OUTSIDE_FACTOR", "no_solution", "refusal"]
+__all__ = ["OUTSIDE_FACTOR", "method_refusal", "no_solution", "refusal"]

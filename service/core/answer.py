@@ -19,7 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .camera import project_to_pixel
+from .camera import project_rows
 from .blends import MIN_DELTA_MAG, dominant_kernel
 from .methods.quad_kernel import recheck_pairs
 from .navdb.reader import NavDatabase
@@ -51,8 +51,9 @@ def compiled_checks(obs, db: NavDatabase, m_obs: IntArray, m_cat: IntArray, r: n
         return None
     cam = obs.cameras[0]
     k = obs.kernel_arrays
-    g = field_grid(db)
-    chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + FIELD_MARGIN_DEG) / 2)
+    radius_deg = cam.diagonal_fov_deg / 2 + FIELD_MARGIN_DEG
+    g = field_grid(db, radius_deg)
+    chord = 2 * math.sin(math.radians(radius_deg) / 2)
     flux = obs.flux if obs.flux is not None else np.zeros(0)
     o, c, moved = answer_kernel(obs.xy, flux, obs.flux is not None, m_obs, m_cat, np.ascontiguousarray(r),
                                 star_vec64(db), star_mags(db),
@@ -70,8 +71,9 @@ def recheck(obs, db: NavDatabase, obs_idx: IntArray, cat_idx: IntArray, n_trials
         return None
     cam = obs.cameras[0]
     k = obs.kernel_arrays
-    g = field_grid(db)
-    near_chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG) / 2)
+    radius_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
+    g = field_grid(db, radius_deg)
+    near_chord = 2 * math.sin(math.radians(radius_deg) / 2)
     ok, m_obs, m_cat, r, prob = recheck_pairs(
         obs.vec, obs.xy, star_vec64(db), np.ascontiguousarray(obs_idx, dtype=np.int64),
         np.ascontiguousarray(cat_idx, dtype=np.int64), g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns,
@@ -89,15 +91,16 @@ def field_stars(r_cam: np.ndarray, chord: float, cell: float, n_side: int, keys:
     buf = np.empty(len(star_vec), np.int64)
     n = collect_within(r_cam[2, 0], r_cam[2, 1], r_cam[2, 2], chord, cell, n_side, keys, starts, stars, star_vec,
                        columns, buf)
+    xy = np.empty((n, 2))
+    inside = project_rows(r_cam, star_vec, buf[:n], cam, dist, xy)
     rows = np.empty(n, np.int64)
     pxy = np.empty((n, 2))
     m = 0
     for i in range(n):
-        inside, x, y = project_to_pixel(r_cam, star_vec[buf[i]], cam, dist)
-        if inside:
+        if inside[i]:
             rows[m] = buf[i]
-            pxy[m, 0] = x
-            pxy[m, 1] = y
+            pxy[m, 0] = xy[i, 0]
+            pxy[m, 1] = xy[i, 1]
             m += 1
     return rows[:m].copy(), pxy[:m].copy()
 

@@ -246,28 +246,41 @@ class Rig:
         return np.asarray(v_cam) @ r  # R^T v for row vectors
 
 
-@njit(cache=True, nogil=True, inline="always")
-def project_to_pixel(r_cam: np.ndarray, v: np.ndarray, cam: np.ndarray, dist: np.ndarray
-                     ) -> tuple[bool, float, float]:
-    """Pixel ``(x, y)`` of the ICRS direction ``v`` under ``r_cam`` (ICRS -> camera), for a
-    camera as the kernels take it (``cam`` = ``f, cx, cy, w, h``; ``dist`` = Brown-Conrady ``k1,
-    k2, p1, p2, k3``), and whether it is in front and inside the image (as
-    :meth:`Camera.vector_to_pixel`)."""
-    z = r_cam[2, 0] * v[0] + r_cam[2, 1] * v[1] + r_cam[2, 2] * v[2]
-    if z <= 1e-9:
-        return False, 0.0, 0.0
-    xn = (r_cam[0, 0] * v[0] + r_cam[0, 1] * v[1] + r_cam[0, 2] * v[2]) / z
-    yn = (r_cam[1, 0] * v[0] + r_cam[1, 1] * v[1] + r_cam[1, 2] * v[2]) / z
+@njit(cache=True, nogil=True)
+def project_rows(r_cam: np.ndarray, vec: np.ndarray, rows: np.ndarray, cam: np.ndarray, dist: np.ndarray,
+                 xy: np.ndarray) -> np.ndarray:
+    """Pixels of the ICRS directions ``vec[rows]`` under ``r_cam`` (ICRS -> camera), written to
+    ``xy`` ``(len(rows), 2)``, for a camera as the kernels take it (``cam`` = ``f, cx, cy, w, h``;
+    ``dist`` = Brown-Conrady ``k1, k2, p1, p2, k3``). Returns whether each is in front and inside
+    the image (as :meth:`Camera.vector_to_pixel`).
+
+    One call for a batch, with the arithmetic in its own loop: a kernel that called (or inlined)
+    a function of array arguments once a star paid two atomic reference counts an argument a
+    star, which numba keeps around the call."""
+    inside = np.zeros(len(rows), np.bool_)
     k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
-    if k1 != 0 or k2 != 0 or p1 != 0 or p2 != 0 or k3 != 0:
-        r2 = xn * xn + yn * yn
-        radial = 1 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
-        xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
-        yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
-        xn, yn = xd, yd
-    x = cam[0] * xn + cam[1]
-    y = cam[0] * yn + cam[2]
-    return x >= -0.5 and x <= cam[3] - 0.5 and y >= -0.5 and y <= cam[4] - 0.5, x, y
+    distorted = k1 != 0 or k2 != 0 or p1 != 0 or p2 != 0 or k3 != 0
+    f, cx, cy, x_max, y_max = cam[0], cam[1], cam[2], cam[3] - 0.5, cam[4] - 0.5
+    for i in range(len(rows)):
+        row = rows[i]
+        v0, v1, v2 = vec[row, 0], vec[row, 1], vec[row, 2]
+        z = r_cam[2, 0] * v0 + r_cam[2, 1] * v1 + r_cam[2, 2] * v2
+        if z <= 1e-9:
+            continue
+        xn = (r_cam[0, 0] * v0 + r_cam[0, 1] * v1 + r_cam[0, 2] * v2) / z
+        yn = (r_cam[1, 0] * v0 + r_cam[1, 1] * v1 + r_cam[1, 2] * v2) / z
+        if distorted:
+            r2 = xn * xn + yn * yn
+            radial = 1 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
+            xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
+            yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
+            xn, yn = xd, yd
+        x = f * xn + cx
+        y = f * yn + cy
+        xy[i, 0] = x
+        xy[i, 1] = y
+        inside[i] = x >= -0.5 and x <= x_max and y >= -0.5 and y <= y_max
+    return inside
 
 
 @njit(cache=True, nogil=True)

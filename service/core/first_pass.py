@@ -35,6 +35,7 @@ from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
 from .methods.quad_kernel import STATUS_FOUND, quad_search, recheck_pairs
 from .navdb.reader import NavDatabase
+from .skygrid import SkyGrid
 from .verify import NEAR_MARGIN_DEG, Observation, Verifier, field_grid, star_vec64
 
 
@@ -48,13 +49,10 @@ class Deeper:
         The deeper member's row of each star of the searched member (-1: not there).
     star_vec : (D, 3) float64
         The deeper member's star vectors (ICRS).
-    grid : tuple
-        Its field grid (:func:`~.answer.field_grid`) as the kernels take it.
     """
 
     rows: np.ndarray
     star_vec: np.ndarray
-    grid: tuple[Any, ...]
 
 
 def deeper_arrays(shallow: NavDatabase, deep: NavDatabase) -> Deeper:
@@ -70,13 +68,11 @@ def deeper_arrays(shallow: NavDatabase, deep: NavDatabase) -> Deeper:
         pos = np.minimum(np.searchsorted(hip_d[order], hip_s), len(hip_d) - 1)
         rows = order[pos]
         rows = np.where(hip_d[rows] == hip_s, rows, -1).astype(np.int64)
-        g = field_grid(deep)
-        got = cache[key] = (deep, Deeper(rows, star_vec64(deep), (g.cell, g.n_side, g.keys, g.starts, g.stars,
-                                                                      g.columns)))
+        got = cache[key] = (deep, Deeper(rows, star_vec64(deep)))
     return got[1]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class FirstPass:
     """What :func:`first_pass` found.
 
@@ -107,11 +103,64 @@ def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigm
     k = obs.kernel_arrays
     static = _static_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob)
     flux = obs.flux if obs.flux is not None else _NO_FLUX
-    out = first_pass_kernel(obs.vec, obs.xy, flux, obs.flux is not None, k.mounts, k.cams, k.dist, k.rows,
-                            k.row_off, *static)
-    search, solved, used_deep, m_obs, m_cat, r, prob, res, rms, sd = out
-    return FirstPass(search, bool(solved), deepest if used_deep else member, m_obs, m_cat, r, float(prob), res,
-                     float(rms), (float(sd[0]), float(sd[1]), float(sd[2])), int(search[7]))
+    solved, used_deep, ints, floats = first_pass_kernel(obs.vec, obs.xy, flux, obs.flux is not None, k.mounts,
+                                                        k.cams, k.dist, k.rows, k.row_off, *static)
+    if not solved:
+        search = _unpack_search(ints, floats)
+        return FirstPass(search, False, member, _NO_ROWS, _NO_ROWS, search[5], 1.0, _NO_RES, 0.0, (0.0, 0.0, 0.0),
+                         int(search[7]))
+    n = int(ints[1])
+    sd = floats[11:14].tolist()
+    return FirstPass(_SOLVED_SEARCH, True, deepest if used_deep else member, ints[2:2 + n], ints[2 + n:],
+                     floats[:9].reshape(3, 3), float(floats[9]), floats[14:], float(floats[10]),
+                     (sd[0], sd[1], sd[2]), int(ints[0]))
+
+
+def _unpack_search(ints: np.ndarray, floats: np.ndarray) -> tuple[Any, ...]:
+    """:func:`~.methods.quad_kernel.quad_search`'s result from :func:`_pack_search`'s arrays."""
+    status, trials, n_pat, exhausted, probes, cands, n_m, k, n_l = ints[:9].tolist()
+    i = 9
+    hyp_obs, hyp_cat = ints[i:i + 4], ints[i + 4:i + 8]
+    i += 8
+    m_obs, m_cat = ints[i:i + n_m], ints[i + n_m:i + 2 * n_m]
+    i += 2 * n_m
+    marg_off = ints[i:i + k + 1]
+    i += k + 1
+    marg_obs, marg_cat = ints[i:i + n_l], ints[i + n_l:i + 2 * n_l]
+    marg_trials = ints[i + 2 * n_l:i + 2 * n_l + k]
+    return (status, hyp_obs, hyp_cat, m_obs, m_cat, floats[:9].reshape(3, 3), float(floats[9]), trials, n_pat,
+            bool(exhausted), floats[10:10 + 9 * k].reshape(k, 3, 3), floats[10 + 9 * k:10 + 10 * k], marg_off,
+            marg_obs, marg_cat, marg_trials, probes, cands)
+
+
+@njit(cache=True, nogil=True)
+def _pack_search(search):
+    """:func:`~.methods.quad_kernel.quad_search`'s result as one int64 and one float64 array
+    (a compiled call returns each array it hands to Python at ~0.3 us apiece; the search has 11)."""
+    status, hyp_obs, hyp_cat, m_obs, m_cat, r, prob, trials, n_pat, exhausted = search[:10]
+    marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials, probes, cands = search[10:]
+    n_m, k, n_l = len(m_obs), len(marg_prob), len(marg_obs)
+    ints = np.empty(9 + 8 + 2 * n_m + k + 1 + 2 * n_l + k, np.int64)
+    ints[0], ints[1], ints[2], ints[3], ints[4], ints[5] = status, trials, n_pat, exhausted, probes, cands
+    ints[6], ints[7], ints[8] = n_m, k, n_l
+    i = 9
+    ints[i:i + 4] = hyp_obs
+    ints[i + 4:i + 8] = hyp_cat
+    i += 8
+    ints[i:i + n_m] = m_obs
+    ints[i + n_m:i + 2 * n_m] = m_cat
+    i += 2 * n_m
+    ints[i:i + k + 1] = marg_off
+    i += k + 1
+    ints[i:i + n_l] = marg_obs
+    ints[i + n_l:i + 2 * n_l] = marg_cat
+    ints[i + 2 * n_l:] = marg_trials
+    floats = np.empty(10 + 10 * k)
+    floats[:9] = r.ravel()
+    floats[9] = prob
+    floats[10:10 + 9 * k] = marg_r.ravel()
+    floats[10 + 9 * k:] = marg_prob
+    return ints, floats
 
 
 STATIC_CACHE_SIZE = 64
@@ -132,16 +181,20 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
     tol = (3.0 * math.sqrt(2.0) * sigma_px + 0.5) * scale
     sigma_rad = sigma_px * scale
     answer_radius = match_radius_px or max(2.5, 3.0 * sigma_rad / scale)  # as pipeline._solution has it
-    near_chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG) / 2)
-    field_chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + FIELD_MARGIN_DEG) / 2)
+    near_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
+    field_deg = cam.diagonal_fov_deg / 2 + FIELD_MARGIN_DEG
+    near_chord = 2 * math.sin(math.radians(near_deg) / 2)
+    field_chord = 2 * math.sin(math.radians(field_deg) / 2)
     has_deep = deepest is not member
     deep = deeper_arrays(member, deepest) if has_deep else _NO_DEEPER
-    g = field_grid(member)
+    near, deep_near = _grid(field_grid(member, near_deg)), (_grid(field_grid(deepest, near_deg)) if has_deep
+                                                           else _NO_GRID)
+    g = field_grid(member, field_deg)
     strong = min(max_false_prob, Verifier.strong_false_prob)
     static = (QUERY_STARS, tol, qm.patterns, qm.table, qm.ratio_bin, qm.edge_bin, qm.edge_max, qm.star_vec,
-              *qm.screen, *qm.field, near_chord, float(radius), float(scale), float(max_false_prob),
+              *qm.screen, *near, near_chord, float(radius), float(scale), float(max_false_prob),
               float(Verifier.strong_false_prob), int(Verifier.confirm_patterns), int(Verifier.screen_stars),
-              MAX_PROBES, MAX_CHECKS, has_deep, deep.rows, deep.star_vec, *deep.grid, float(strong),
+              MAX_PROBES, MAX_CHECKS, has_deep, deep.rows, deep.star_vec, *deep_near, float(strong),
               g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, star_mags(member), star_mags(deepest),
               field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF)
     if len(cache) >= STATIC_CACHE_SIZE:
@@ -151,9 +204,17 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
 
 
 _NO_FLUX = np.zeros(0)
-_NO_DEEPER = Deeper(np.zeros(0, np.int64), np.zeros((0, 3)),
-                    (1.0, 1, np.zeros(1, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int64),
-                     np.zeros(1, np.int64)))
+_NO_ROWS = np.zeros(0, np.int64)
+_NO_RES = np.zeros(0)
+_SOLVED_SEARCH = (STATUS_FOUND,)
+"""A solved first pass's ``search``: only its status is kept (the answer holds the rest)."""
+_NO_DEEPER = Deeper(np.zeros(0, np.int64), np.zeros((0, 3)))
+_NO_GRID = (1.0, 1, np.zeros(1, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int64), np.zeros(1, np.int64))
+
+
+def _grid(g: SkyGrid) -> tuple[Any, ...]:
+    """A grid's arrays in the order the kernels take them."""
+    return g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns
 
 
 @njit(cache=True, nogil=True)
@@ -164,8 +225,10 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
                       has_deep, deep_rows, d_vec, d_cell, d_side, d_keys, d_starts, d_stars, d_columns, strong,
                       a_cell, a_side, a_keys, a_starts, a_stars, a_columns, mag, d_mag, field_chord,
                       answer_radius, sigma_px, sigma_rad, prior_dof):
-    """The first pass (see the module's docstring). Returns ``(search, solved, used_deep,
-    obs_rows, cat_rows, matrix, false_prob, residuals_arcsec, rms_arcsec, sigma_arcsec)``."""
+    """The first pass (see the module's docstring). Returns ``(solved, used_deep, ints, floats)``:
+    when solved ``ints`` = trials, n, the n observed rows, the n catalogue rows and ``floats`` =
+    the matrix (9, row-major), false-match bound, RMS (arcsec), 1-sigma x, y, z (arcsec), the n
+    residuals (arcsec); otherwise the search's result as :func:`_pack_search` packs it."""
     search = quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bin, edge_max, star_vec,
                          s_cell, s_side, s_keys, s_starts, s_stars, s_columns, g_cell, g_side, g_keys, g_starts,
                          g_stars, g_columns, near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale,
@@ -173,7 +236,8 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
                          max_checks)
     m_obs, m_cat, r, prob, trials = search[3], search[4], search[5], search[6], search[7]
     if search[0] != STATUS_FOUND:
-        return search, False, False, m_obs, m_cat, r, 1.0, np.zeros(0), 0.0, np.zeros(3)
+        ints, floats = _pack_search(search)
+        return False, False, ints, floats
     used_deep = False
     vec, cell, side, keys, starts, stars, columns, mags = star_vec, a_cell, a_side, a_keys, a_starts, a_stars, \
         a_columns, mag
@@ -206,4 +270,15 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
     if moved:
         r = wahba_kernel(o, ref, np.ones(len(m_obs)))
     res, rms, sd = _fit_stats(o, ref, r, -1.0)
-    return search, True, used_deep, m_obs, m_cat, r, prob, res, rms, pooled_sigma(res, sd, sigma_rad, prior_dof)
+    sd = pooled_sigma(res, sd, sigma_rad, prior_dof)
+    n = len(m_obs)
+    ints = np.empty(2 + 2 * n, np.int64)
+    ints[0], ints[1] = trials, n
+    ints[2:2 + n] = m_obs
+    ints[2 + n:] = m_cat
+    floats = np.empty(14 + n)
+    floats[:9] = r.ravel()
+    floats[9], floats[10] = prob, rms
+    floats[11:14] = sd
+    floats[14:] = res
+    return True, used_deep, ints, floats

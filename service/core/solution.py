@@ -4,7 +4,6 @@ pass both end here)."""
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -13,13 +12,8 @@ from numba import njit
 from .answer import star_mags
 from .attitude import matrix_to_quat, radec_roll
 from .navdb.reader import NavDatabase
-from .types import Solution, SolveStatus, StarMatch
+from .types import MatchedStars, Solution, SolveStatus
 from .verify import Observation
-
-_star_match = functools.partial(tuple.__new__, StarMatch)
-"""``StarMatch`` of a row tuple without the named tuple's Python-level ``__new__`` (what its
-``_make`` does; ~3x cheaper, and an answer builds dozens)."""
-
 
 def _zeros_list(n: int, _zeros: list[int] = [0] * 256) -> list[int]:  # noqa: B006 (read only)
     return _zeros[:n] if n <= len(_zeros) else [0] * n
@@ -67,9 +61,8 @@ def answer(obs: Observation, db: NavDatabase, obs_rows: np.ndarray, cat_rows: np
         camera = cam_rows[order].tolist()
     cat = cat_rows[order]
     star_ra, star_dec, star_mag, star_res = _star_columns(ref, order, star_mags(db), cat, residuals_arcsec)
-    stars = tuple(map(_star_match, zip(  # by camera, then by centroid index; column-wise (~2x faster)
-        index[order].tolist(), _hips(db)[cat].tolist(), star_ra.tolist(), star_dec.tolist(), star_mag.tolist(),
-        star_res.tolist(), camera)))
+    stars = MatchedStars(index[order], _hips(db)[cat], star_ra, star_dec, star_mag, star_res, camera)  # by camera,
+    # then by centroid index; made tuples when first read
     q = matrix_to_quat(matrix)
     return Solution(
         SolveStatus.SOLVED,

@@ -20,7 +20,7 @@ from numba import njit
 from scipy.special import gammaincinv
 
 from .attitude import wahba_svd
-from .camera import project_to_pixel
+from .camera import project_rows
 from .geometry import cross, pairwise_angles
 from .match import _camera_rows
 from .skygrid import collect_within
@@ -122,7 +122,6 @@ def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,
     each boresight; one compiled call per camera (:func:`field_check_kernel`)."""
     obs = verifier.obs
     stars = star_vec64(verifier.db)
-    g = field_grid(verifier.db)
     unseen = np.zeros(len(rs), dtype=np.int64)
     explained = np.zeros(len(rs), dtype=np.int64)
     if len(rs) == 0:
@@ -131,7 +130,9 @@ def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,
     cands = np.ascontiguousarray(cands, dtype=np.int64)
     cams, dist = _camera_rows(tuple(obs.cameras))
     for c, cam in enumerate(obs.cameras):
-        half = math.radians(cam.diagonal_fov_deg / 2 + 0.2)
+        half_deg = cam.diagonal_fov_deg / 2 + 0.2
+        half = math.radians(half_deg)
+        g = field_grid(verifier.db, half_deg)
         rows = np.setdiff1d(obs.by_camera[c], obs_idx)
         u, e = field_check_kernel(rs, cands, np.ascontiguousarray(obs.mountings[c], dtype=np.float64), cams[c],
                                   dist[c], stars, 2 * math.sin(half / 2), g.cell, g.n_side, g.keys, g.starts,
@@ -175,13 +176,13 @@ def field_check_kernel(rs: np.ndarray, cands: np.ndarray, mount: np.ndarray, cam
                 d2[i] = (v[0] - bx) ** 2 + (v[1] - by) ** 2 + (v[2] - bz) ** 2
             near = near[np.argsort(d2)[:max_near]]
         hit[:] = False
+        xy = np.empty((len(near), 2))
+        inside = project_rows(r_cam, star_vec, near, cam, dist, xy)
         for i in range(len(near)):
             row = near[i]
-            if row == cands[k, 0] or row == cands[k, 1] or row == cands[k, 2]:
+            if row == cands[k, 0] or row == cands[k, 1] or row == cands[k, 2] or not inside[i]:
                 continue
-            inside, x, y = project_to_pixel(r_cam, star_vec[row], cam, dist)
-            if not inside:
-                continue
+            x, y = xy[i, 0], xy[i, 1]
             seen = False
             for j in range(n_obs):
                 dx = x - obs_xy[j, 0]

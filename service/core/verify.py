@@ -399,17 +399,25 @@ def sky_grid(db: NavDatabase) -> SkyGrid:
     return cache["grid"]
 
 
-FIELD_CELL_DEG = 1.0
-"""Cell of the grid that gathers a field's catalogue stars (about the field's size / 10)."""
+FIELD_CELL_DEG = (1.0, 2.0, 4.0, 8.0)
+"""Cells (deg) of the grids that gather a field's catalogue stars: a query of radius ``R`` uses
+the largest at most ``R / 2.5`` (at least the first). A cell about the query's size keeps the
+scan short: a 10.8-deg gathering of 55 stars took 4.5 us on 1-deg cells (~480 columns looked
+at), 1.5 us on 4-deg ones."""
 
 
-def field_grid(db: NavDatabase) -> SkyGrid:
-    """The database's stars on a grid of ``FIELD_CELL_DEG`` cells (built once per opened
-    database), for gathering a whole field in a compiled kernel."""
+def field_grid(db: NavDatabase, radius_deg: float = 0.0) -> SkyGrid:
+    """The database's stars on the grid of :data:`FIELD_CELL_DEG` cells suited to gathering
+    every star within ``radius_deg`` of a point (built once per opened database and cell)."""
+    cell = FIELD_CELL_DEG[0]
+    for c in FIELD_CELL_DEG:
+        if c <= radius_deg / 2.5:
+            cell = c
     cache = db.__dict__.setdefault("_cache", {})
-    if "field_grid" not in cache:
-        cache["field_grid"] = build_sky_grid(np.asarray(db.stars.vec), cell_rad=math.radians(FIELD_CELL_DEG))
-    return cache["field_grid"]
+    key = ("field_grid", cell)
+    if key not in cache:
+        cache[key] = build_sky_grid(np.asarray(db.stars.vec), cell_rad=math.radians(cell))
+    return cache[key]
 
 
 def star_vec64(db: NavDatabase) -> np.ndarray:

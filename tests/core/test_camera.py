@@ -74,3 +74,28 @@ def test_rig_rotates_into_body() -> None:
     v_body = rig.body_vectors(1, np.array([[0.0, 0.0, 1.0]]))
     from service.core.attitude import quat_to_matrix
     np.testing.assert_allclose(quat_to_matrix(np.array([s, s, 0, 0])) @ v_body[0], [0, 0, 1], atol=1e-12)
+
+
+@pytest.mark.parametrize("dist", [None, (-0.2, 0.05, 0.001, -0.0005, 0.0)])
+def test_project_rows_is_vector_to_pixel(dist: tuple[float, ...] | None) -> None:
+    """The kernels' batch projection gives Camera.vector_to_pixel's pixels and inside mask,
+    stars behind the camera and outside the image included."""
+    from service.core.attitude import quat_to_matrix
+    from service.core.camera import project_rows
+    from service.core.match import _camera_rows
+
+    cam = Camera.from_fov(12.0, 1024, 768, distortion=dist)
+    gen = np.random.default_rng(3)
+    vec = gen.normal(size=(400, 3))
+    vec /= np.linalg.norm(vec, axis=1, keepdims=True)
+    r = quat_to_matrix(np.array([0.9, 0.1, -0.3, 0.2]) / np.linalg.norm([0.9, 0.1, -0.3, 0.2]))
+    vec[:200] = (r.T @ (np.array([0, 0, 1.0]) + gen.normal(scale=0.1, size=(200, 3))).T).T  # near the boresight
+    vec /= np.linalg.norm(vec, axis=1, keepdims=True)
+    rows = gen.permutation(len(vec))[:300].astype(np.int64)
+    cams, dists = _camera_rows((cam,))
+    xy = np.empty((len(rows), 2))
+    inside = project_rows(r, vec, rows, cams[0], dists[0], xy)
+    want_xy, want_inside = cam.vector_to_pixel(vec[rows] @ r.T)
+    assert 20 < inside.sum() < len(rows)
+    np.testing.assert_array_equal(inside, want_inside)
+    np.testing.assert_allclose(xy[inside], want_xy[inside], atol=1e-6)

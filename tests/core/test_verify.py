@@ -147,3 +147,26 @@ def test_rig_camera_with_one_star_is_not_paired_by_a_loose_roll(default_set_db) 
     assert sol.solved
     assert 68891 not in [s.hip for s in sol.stars]
     assert score(sol, frame.frames[0].quaternion, frame.frames[0].hip.tolist(), camera=0).correct
+
+
+def test_every_field_grid_gathers_the_same_stars() -> None:
+    """field_grid picks its cell by the query's radius; whatever the cell, a gathering holds
+    exactly the stars within the chord (checked against a brute-force scan)."""
+    import math
+
+    from service.core.skygrid import build_sky_grid, collect_within
+    from service.core.verify import FIELD_CELL_DEG
+
+    gen = np.random.default_rng(4)
+    vec = gen.normal(size=(20000, 3))
+    vec /= np.linalg.norm(vec, axis=1, keepdims=True)
+    grids = [build_sky_grid(vec, cell_rad=math.radians(c)) for c in FIELD_CELL_DEG]
+    buf = np.empty(len(vec), np.int64)
+    for radius_deg in (2.0, 6.0, 11.0, 21.0):
+        chord = 2 * math.sin(math.radians(radius_deg) / 2)
+        for p in vec[:20]:
+            want = np.flatnonzero(np.linalg.norm(vec - p, axis=1) <= chord)
+            for g in grids:
+                n = collect_within(p[0], p[1], p[2], chord, g.cell, g.n_side, g.keys, g.starts, g.stars, g.vec,
+                                   g.columns, buf)
+                np.testing.assert_array_equal(np.sort(buf[:n]), want)

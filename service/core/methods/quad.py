@@ -26,7 +26,7 @@ from ..catalog import StarTable
 from ..errors import DatabaseCorruptError
 from ..navdb.reader import NavDatabase
 from ..skygrid import build_sky_grid
-from ..verify import NEAR_MARGIN_DEG, Verified, Verifier, sky_grid
+from ..verify import NEAR_MARGIN_DEG, Verified, Verifier, field_grid, sky_grid
 from .base import Progress, SolveContext
 from .quad_build import LAYOUT, build_quad_table
 from .quad_kernel import STATUS_FOUND, quad_search
@@ -37,8 +37,6 @@ MAX_PROBES = 200_000
 """Hash probes a frame may make (about 2 ms)."""
 MAX_CHECKS = 400
 """Full verifications a frame may make."""
-FIELD_CELL_DEG = 1.0
-"""Cell of the grid that gathers a field's catalogue stars for the verification."""
 
 
 class Quad:
@@ -78,8 +76,6 @@ class QuadMatcher:
         self.star_vec = np.ascontiguousarray(db.stars.vec, dtype=np.float64)
         s = sky_grid(db)
         self.screen = (s.cell, s.n_side, s.keys, s.starts, s.stars, s.columns)
-        g = build_sky_grid(self.star_vec, cell_rad=math.radians(FIELD_CELL_DEG))
-        self.field = (g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns)
 
     def identify(self, ctx: SolveContext) -> Verified | None:
         v = ctx.verifier
@@ -112,10 +108,11 @@ class QuadMatcher:
         :func:`~.quad_kernel.quad_search`)."""
         cam = obs.cameras[0]
         k = obs.kernel_arrays
-        near_chord = 2 * math.sin(math.radians(cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG) / 2)
+        near_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
+        g = field_grid(self.db, near_deg)
         return quad_search(obs.vec, obs.xy, QUERY_STARS, tol_rad, self.patterns, self.table,
                            self.ratio_bin, self.edge_bin, self.edge_max, self.star_vec, *self.screen,
-                           *self.field, near_chord, k.mounts, k.cams, k.dist, k.rows, k.row_off,
+                           g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, 2 * math.sin(math.radians(near_deg) / 2), k.mounts, k.cams, k.dist, k.rows, k.row_off,
                            float(v.match_radius_px), float(obs.pixel_scale_rad), float(v.max_false_prob),
                            float(v.strong_false_prob), int(v.confirm_patterns), int(v.screen_stars),
                            int(v.trials), MAX_PROBES, MAX_CHECKS)

@@ -173,9 +173,10 @@ def _unique_rows(rows: np.ndarray, n: int) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _angle(u: np.ndarray, v: np.ndarray) -> float:
-    """Angle between unit vectors (radians), accurate at small angles."""
-    dx, dy, dz = u[0] - v[0], u[1] - v[1], u[2] - v[2]
+def row_angle(vec: np.ndarray, a: int, b: int) -> float:
+    """Angle between the unit vectors ``vec[a]`` and ``vec[b]`` (radians), accurate at small
+    angles. Rows, not row views, are passed: a view costs atomic reference counts in a loop."""
+    dx, dy, dz = vec[a, 0] - vec[b, 0], vec[a, 1] - vec[b, 1], vec[a, 2] - vec[b, 2]
     return 2.0 * math.asin(min(math.sqrt(dx * dx + dy * dy + dz * dz) / 2.0, 1.0))
 
 
@@ -185,7 +186,7 @@ def sorted_edges(vec: np.ndarray, ids: np.ndarray, out: np.ndarray) -> None:
     k = 0
     for i in range(4):
         for j in range(i + 1, 4):
-            out[k] = _angle(vec[ids[i]], vec[ids[j]])
+            out[k] = row_angle(vec, ids[i], ids[j])
             k += 1
     out.sort()
 

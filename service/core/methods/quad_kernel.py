@@ -31,7 +31,7 @@ from ..match import _match_rig, _refine, _wahba_pairs
 from ..skygrid import collect_within, has_star_within
 from ..attitude import wahba_kernel
 from ..verify import SETTLE_FACTORS
-from .quad_build import FINE_BITS, FINE_STEPS, FINGER_BITS, N_RATIO_BINS, combine_key, key_hash, sorted_edges
+from .quad_build import FINE_BITS, FINE_STEPS, FINGER_BITS, N_RATIO_BINS, combine_key, key_hash, row_angle, sorted_edges
 
 PERMS = np.array([[a, b, c, d] for a in range(4) for b in range(4) for c in range(4) for d in range(4)
                   if len({a, b, c, d}) == 4], dtype=np.int64)
@@ -63,12 +63,6 @@ def binomial_tail(n: int, k: int, p: float) -> float:
     return min(total, 1.0)
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _angle(u: np.ndarray, v: np.ndarray) -> float:
-    dx, dy, dz = u[0] - v[0], u[1] - v[1], u[2] - v[2]
-    return 2.0 * math.asin(min(math.sqrt(dx * dx + dy * dy + dz * dz) / 2.0, 1.0))
-
-
 @njit(cache=True, nogil=True)
 def _label(obs_vec: np.ndarray, o: np.ndarray, star_vec: np.ndarray, c: np.ndarray, tol: float,
            out: np.ndarray) -> bool:
@@ -78,8 +72,8 @@ def _label(obs_vec: np.ndarray, o: np.ndarray, star_vec: np.ndarray, c: np.ndarr
     ec = np.empty((4, 4))
     for k in range(6):
         i, j = EDGE_PAIRS[k, 0], EDGE_PAIRS[k, 1]
-        eo[k] = _angle(obs_vec[o[i]], obs_vec[o[j]])
-        ec[i, j] = ec[j, i] = _angle(star_vec[c[i]], star_vec[c[j]])
+        eo[k] = row_angle(obs_vec, o[i], o[j])
+        ec[i, j] = ec[j, i] = row_angle(star_vec, c[i], c[j])
     best = tol
     found = False
     for p in range(24):

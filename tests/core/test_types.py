@@ -1,0 +1,37 @@
+"""The answer's star list (service.core.types.MatchedStars): columns made tuples when read."""
+
+import pickle
+
+import numpy as np
+
+from service.core.types import MatchedStars, Solution, SolveStatus, StarMatch
+
+
+def _columns() -> tuple:
+    return (np.array([4, 0, 7]), np.array([32349, 30438, 24436]), np.array([101.28, 95.98, 78.63]),
+            np.array([-16.71, -52.69, -8.2]), np.array([-1.46, -0.74, 0.13]), np.array([0.5, 1.25, 2.0]),
+            [0, 0, 0])
+
+
+def test_reads_as_the_tuple_of_star_matches() -> None:
+    stars = MatchedStars(*_columns())
+    want = tuple(StarMatch(*row) for row in zip(*[c.tolist() if isinstance(c, np.ndarray) else c for c in _columns()]))
+    assert len(stars) == 3
+    assert stars == want and want == stars and stars == MatchedStars(*_columns())
+    assert stars != want[:2]
+    assert stars[1].hip == 30438 and isinstance(stars[1].hip, int) and isinstance(stars[1].ra_deg, float)
+    assert stars[1:] == want[1:]
+    assert [s.centroid for s in stars] == [4, 0, 7]
+    assert hash(stars) == hash(want)
+    assert repr(stars) == repr(want)
+
+
+def test_a_solution_with_it_compares_and_pickles_as_with_the_tuple() -> None:
+    stars = MatchedStars(*_columns())
+    sol = Solution(SolveStatus.SOLVED, "quad", quaternion=(1.0, 0.0, 0.0, 0.0), stars=stars)
+    plain = Solution(SolveStatus.SOLVED, "quad", quaternion=(1.0, 0.0, 0.0, 0.0), stars=tuple(stars))
+    assert sol == plain
+    back = pickle.loads(pickle.dumps(sol))
+    assert back == plain and isinstance(back.stars, tuple)
+    assert sol.to_dict()["stars"][2] == {"centroid": 7, "camera": 0, "hip": 24436, "ra_deg": 78.63,
+                                         "dec_deg": -8.2, "mag": 0.13, "residual_arcsec": 2.0}

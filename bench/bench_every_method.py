@@ -70,7 +70,8 @@ def run_camera(cam: str, frames_n: int, seed: int, db_dir: Path) -> list[dict[st
 
 def render(rows: list[dict[str, Any]], cams: list[str], args: argparse.Namespace, info: dict[str, Any]) -> str:
     by = {(r["camera"], r["method"]): r for r in rows}
-    header = ["method", *(f"{c} ({PRESETS[c].camera.fov_deg:.3g} deg, {PRESETS[c].mag_limit:g} Mv)" for c in cams)]
+    header = ["method", *(f"{c} ({PRESETS[c].camera.fov_deg:.3g} deg, {PRESETS[c].mag_limit:g} Mv)"
+                          for c in cams)]
     table = md_table(header, [[m, *(cell(by[(c, m)]) for c in cams)] for m in (*PUBLISHED, "auto")])
     cmd = "python -m bench.bench_every_method " + " ".join(sys.argv[1:])
     return (f"{args.frames} frames per cell at {NOISE_PX} px, 2 false stars, no magnitude noise; cell = right "

@@ -59,8 +59,9 @@ def pso_refusal(params: dict[str, Any], n_stars: int, mag_limit: float, camera: 
     masters = stars_per_deg2(n_stars) * w * h
     if masters >= PSO_MIN_MASTERS:
         return None
-    return (f"its {r0:g}-deg pattern circle must lie inside the {camera.fov_deg:.3g}x{camera.fov_y_deg:.3g}-deg "
-            f"field, which leaves a {w:.2g}x{h:.2g}-deg centre for its master star, holding {masters:.2g} stars "
+    field = f"{camera.fov_deg:.3g}x{camera.fov_y_deg:.3g}"
+    return (f"its {r0:g}-deg pattern circle must lie inside the {field}-deg field, which leaves a "
+            f"{w:.2g}x{h:.2g}-deg centre for its master star, holding {masters:.2g} stars "
             f"at {mag_limit:g} Mv on average (it needs {PSO_MIN_MASTERS:g})")
 
 
@@ -77,8 +78,9 @@ def radial_refusal(params: dict[str, Any], n_stars: int, mag_limit: float, camer
     if k >= RADIAL_MIN_NEIGHBOURS:
         return None
     window = math.degrees(2 * eps + ring) * 3600
-    return (f"at {sigma_px:g} px of {math.degrees(camera.pixel_scale_rad) * 3600:.3g}\"/px its {window:.0f}\" ring "
-            f"windows hold a catalogue star by chance beyond {reach:.2g} deg, within which a star has {k:.2g} "
+    scale = math.degrees(camera.pixel_scale_rad) * 3600
+    return (f"at {sigma_px:g} px of {scale:.3g}\"/px its {window:.0f}\" ring windows hold a catalogue star "
+            f"by chance beyond {reach:.2g} deg, within which a star has {k:.2g} "
             f"neighbours at {mag_limit:g} Mv on average (it needs {RADIAL_MIN_NEIGHBOURS:g})")
 
 
@@ -93,8 +95,8 @@ def cannot_serve(db: Any, method: str, camera: Camera, sigma_px: float) -> str |
     check = CHECKS.get(method)
     if check is None or method not in db.tables:
         return None
-    return check(db.method_params(method), int(db.manifest["n_stars"]), float(db.manifest["mag_limit"]), camera,
-                 sigma_px)
+    m = db.manifest
+    return check(db.method_params(method), int(m["n_stars"]), float(m["mag_limit"]), camera, sigma_px)
 
 
 def serving(db: Any, cameras: Sequence[Camera], sigma_px: float, order: Sequence[str]) -> list[str]:
@@ -105,8 +107,9 @@ def serving(db: Any, cameras: Sequence[Camera], sigma_px: float, order: Sequence
 
 def refusal_message(method: str, why: str, where: str, alternatives: Sequence[str]) -> str:
     """The sentence a refused ``method`` answers with: what it cannot serve (``where``), why,
-    and what to use instead (``auto``, and the first of ``alternatives``)."""
-    use = " or ".join(["auto", *alternatives[:1]])
+    and what to use instead (``auto``, and the first of ``alternatives``; without one, a
+    database built with other methods)."""
+    use = f"auto or {alternatives[0]}" if alternatives else "a database built with other methods (--methods)"
     return f"{method} cannot serve {where}: {why}; use {use}"
 
 

@@ -132,3 +132,15 @@ def test_matcher_is_registered(db: NavDatabase) -> None:
     assert isinstance(get_matcher(db, "radial"), RadialMatcher)
     with pytest.raises(ValueError):
         RadialMatcher(db, score="nope")
+
+
+def test_informative_radius_is_where_a_window_fills_by_chance_half_the_time() -> None:
+    """Issue 16: beyond it a ring window holds a catalogue star more often than not."""
+    from service.core.methods.radial import CHANCE_OCCUPANCY, informative_radius
+
+    ring, eps, n = math.radians(99 / 3600), math.radians(183 / 3600), 9042  # seed 004 at 0.5 px
+    r = informative_radius(n, ring, eps, math.radians(28.2))
+    expected = n / 2 * math.sin(r) * (2 * eps + ring)  # catalogue stars in the window at r
+    assert 1 - math.exp(-expected) == pytest.approx(CHANCE_OCCUPANCY)
+    assert 3.5 < math.degrees(r) < 4.5
+    assert informative_radius(100, ring, eps, math.radians(5.0)) == math.radians(5.0)  # sparse: all of R

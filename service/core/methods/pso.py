@@ -219,6 +219,8 @@ class PsoMatcher:
             for flip in range(1, 1 << len(near)):
                 flipped = {int(near[b]) for b in range(len(near)) if flip >> b & 1}
                 variants.append(np.array(sorted(set(inside.tolist()) ^ flipped), np.int64))
+            # a star the catalogue lacks (a false star) in the circle: the tour without it
+            variants += [np.delete(inside, k) for k in range(len(inside))]
         pool = np.union1d(inside, others[np.abs(dm[others] - r) <= tol])
         for members in variants:
             if len(members) < 2 or ctx.expired():

@@ -13,7 +13,8 @@ camera on that database (``service.core.methods.capability``) is answered at onc
 ``camera_outside_database``, and its cell says so with the reason.
 
 Per cell: right answers (%), wrong answers, refused frames, median ms a frame (refusals
-included). Output: ``bench/out/every-method.{md,json}``; the table is printed too.
+included); each camera's header counts the frames holding 4 or more real stars (a frame of 3
+only ``triangle``'s unique-triangle proof can name). Output: ``bench/out/every-method.{md,json}``; the table is printed too.
 """
 
 from __future__ import annotations
@@ -63,15 +64,16 @@ def run_camera(cam: str, frames_n: int, seed: int, db_dir: Path) -> list[dict[st
             refused += a.status == "no_solution" and why is not None
         st = summarize(judged)
         short = why.split(": ", 1)[1].rsplit("; use", 1)[0] if why else None
-        rows.append({"camera": cam, "method": m, **st, "refused": refused, "refused_why": short, "message": why})
+        rows.append({"camera": cam, "method": m, **st, "refused": refused, "refused_why": short, "message": why,
+                     "frames_4_stars": sum(int((f.hip >= 0).sum()) >= 4 for f in frames)})
         print(f"[{cam}] {m}: {cell(rows[-1])}", flush=True)
     return rows
 
 
 def render(rows: list[dict[str, Any]], cams: list[str], args: argparse.Namespace, info: dict[str, Any]) -> str:
     by = {(r["camera"], r["method"]): r for r in rows}
-    header = ["method", *(f"{c} ({PRESETS[c].camera.fov_deg:.3g} deg, {PRESETS[c].mag_limit:g} Mv)"
-                          for c in cams)]
+    header = ["method", *(f"{c} ({PRESETS[c].camera.fov_deg:.3g} deg, {PRESETS[c].mag_limit:g} Mv; "
+                          f"{by[(c, 'auto')]['frames_4_stars']} frames of 4+ stars)" for c in cams)]
     table = md_table(header, [[m, *(cell(by[(c, m)]) for c in cams)] for m in (*PUBLISHED, "auto")])
     cmd = "python -m bench.bench_every_method " + " ".join(sys.argv[1:])
     return (f"{args.frames} frames per cell at {NOISE_PX} px, 2 false stars, no magnitude noise; cell = right "

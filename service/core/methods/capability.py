@@ -122,7 +122,7 @@ def build_warnings(db: Any, order: Sequence[str]) -> list[str]:
     narrowest or the widest square camera its range claims (side ``fov_min_deg``; diagonal
     ``fov_max_deg``), at ``NOMINAL_PX`` px and ``NOMINAL_SIGMA_PX`` px of centroid error."""
     lo, hi = float(db.manifest["fov_min_deg"]), float(db.manifest["fov_max_deg"])
-    sides = dict.fromkeys((lo, hi / math.sqrt(2)))
+    sides = dict.fromkeys((lo, max(lo, hi / math.sqrt(2))))  # no claimed square is narrower than lo
     cams = {side: Camera.from_fov(side, NOMINAL_PX, NOMINAL_PX) for side in sides}
     ok = serving(db, list(cams.values()), NOMINAL_SIGMA_PX, order)
     out = []

@@ -35,6 +35,7 @@ from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
 from .methods.quad_kernel import STATUS_FOUND, quad_search, recheck_pairs
 from .navdb.reader import NavDatabase
+from .solution import answer_columns, star_hips
 from .skygrid import SkyGrid
 from .verify import NEAR_MARGIN_DEG, Observation, Verifier, field_grid, star_vec64
 
@@ -79,7 +80,8 @@ class FirstPass:
     ``search`` is the ``quad`` search's own result (see :func:`~.methods.quad_kernel.quad_search`);
     when ``solved`` the other fields hold the answer: observed and catalogue rows (of ``db``),
     the ICRS -> camera matrix, the false-match bound, and the fit's residuals (arcsec, per pair),
-    RMS (arcsec) and 1-sigma about x, y, z (arcsec).
+    RMS (arcsec) and 1-sigma about x, y, z (arcsec); ``columns`` everything the answer reports
+    (:func:`~.solution.solution_of` makes it a ``Solution``).
     """
 
     search: tuple[Any, ...]
@@ -93,6 +95,8 @@ class FirstPass:
     rms_arcsec: float
     sigma_arcsec: tuple[float, float, float]
     trials: int
+    columns: tuple[np.ndarray, np.ndarray] | None = None
+    """When solved: what the answer reports (:func:`~.solution.answer_columns`), made in the call."""
 
 
 def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigma_px: float,
@@ -104,16 +108,16 @@ def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigm
     static = _static_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob)
     flux = obs.flux if obs.flux is not None else _NO_FLUX
     solved, used_deep, ints, floats = first_pass_kernel(obs.vec, obs.xy, flux, obs.flux is not None, k.mounts,
-                                                        k.cams, k.dist, k.rows, k.row_off, *static)
+                                                        k.cams, k.dist, k.rows, k.row_off, obs.index, *static)
     if not solved:
         search = _unpack_search(ints, floats)
         return FirstPass(search, False, member, _NO_ROWS, _NO_ROWS, search[5], 1.0, _NO_RES, 0.0, (0.0, 0.0, 0.0),
                          int(search[7]))
-    n = int(ints[1])
-    sd = floats[11:14].tolist()
-    return FirstPass(_SOLVED_SEARCH, True, deepest if used_deep else member, ints[2:2 + n], ints[2 + n:],
-                     floats[:9].reshape(3, 3), float(floats[9]), floats[14:], float(floats[10]),
-                     (sd[0], sd[1], sd[2]), int(ints[0]))
+    trials, n = ints[:2].tolist()
+    prob, rms, sd0, sd1, sd2 = floats[9:14].tolist()
+    return FirstPass(_SOLVED_SEARCH, True, deepest if used_deep else member, ints[2:2 + n], ints[2 + n:2 + 2 * n],
+                     floats[:9].reshape(3, 3), prob, floats[14:14 + n], rms, (sd0, sd1, sd2), trials,
+                     (ints[2 + 2 * n:], floats[14 + n:]))
 
 
 def _unpack_search(ints: np.ndarray, floats: np.ndarray) -> tuple[Any, ...]:
@@ -196,7 +200,8 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
               float(Verifier.strong_false_prob), int(Verifier.confirm_patterns), int(Verifier.screen_stars),
               MAX_PROBES, MAX_CHECKS, has_deep, deep.rows, deep.star_vec, *deep_near, float(strong),
               g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, star_mags(member), star_mags(deepest),
-              field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF)
+              field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF, star_hips(member),
+              star_hips(deepest))
     if len(cache) >= STATIC_CACHE_SIZE:
         cache.clear()
     cache[key] = (deepest, static)
@@ -218,17 +223,18 @@ def _grid(g: SkyGrid) -> tuple[Any, ...]:
 
 
 @njit(cache=True, nogil=True)
-def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, n_use, tol, patterns, table,
+def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, obs_index, n_use, tol, patterns, table,
                       ratio_bin, edge_bin, edge_max, star_vec, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
                       g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, radius_px, pixel_scale,
                       max_false_prob, strong_false_prob, confirm_patterns, screen_stars, max_probes, max_checks,
                       has_deep, deep_rows, d_vec, d_cell, d_side, d_keys, d_starts, d_stars, d_columns, strong,
                       a_cell, a_side, a_keys, a_starts, a_stars, a_columns, mag, d_mag, field_chord,
-                      answer_radius, sigma_px, sigma_rad, prior_dof):
+                      answer_radius, sigma_px, sigma_rad, prior_dof, hip, d_hip):
     """The first pass (see the module's docstring). Returns ``(solved, used_deep, ints, floats)``:
-    when solved ``ints`` = trials, n, the n observed rows, the n catalogue rows and ``floats`` =
-    the matrix (9, row-major), false-match bound, RMS (arcsec), 1-sigma x, y, z (arcsec), the n
-    residuals (arcsec); otherwise the search's result as :func:`_pack_search` packs it."""
+    when solved ``ints`` = trials, n, the n observed rows, the n catalogue rows, then
+    :func:`~.solution.answer_columns`' ints, and ``floats`` = the matrix (9, row-major),
+    false-match bound, RMS (arcsec), 1-sigma x, y, z (arcsec), the n residuals (arcsec), then
+    its floats; otherwise the search's result as :func:`_pack_search` packs it."""
     search = quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bin, edge_max, star_vec,
                          s_cell, s_side, s_keys, s_starts, s_stars, s_columns, g_cell, g_side, g_keys, g_starts,
                          g_stars, g_columns, near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale,
@@ -271,14 +277,17 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
         r = wahba_kernel(o, ref, np.ones(len(m_obs)))
     res, rms, sd = _fit_stats(o, ref, r, -1.0)
     sd = pooled_sigma(res, sd, sigma_rad, prior_dof)
+    a_ints, a_floats = answer_columns(r, ref, obs_index[m_obs], m_cat, mags, d_hip if used_deep else hip, res)
     n = len(m_obs)
-    ints = np.empty(2 + 2 * n, np.int64)
+    ints = np.empty(2 + 2 * n + len(a_ints), np.int64)
     ints[0], ints[1] = trials, n
     ints[2:2 + n] = m_obs
-    ints[2 + n:] = m_cat
-    floats = np.empty(14 + n)
+    ints[2 + n:2 + 2 * n] = m_cat
+    ints[2 + 2 * n:] = a_ints
+    floats = np.empty(14 + n + len(a_floats))
     floats[:9] = r.ravel()
     floats[9], floats[10] = prob, rms
     floats[11:14] = sd
-    floats[14:] = res
+    floats[14:14 + n] = res
+    floats[14 + n:] = a_floats
     return True, used_deep, ints, floats

@@ -28,7 +28,7 @@ from .navdb.reader import NavDatabase, NavDatabaseSet
 from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted, too_bright
 from .refusal import no_solution, refusal
 from .residuals import distant_pairs
-from .solution import answer
+from .solution import answer, solution_of
 from .types import Centroids, Solution, SolveStatus
 from .verify import Observation, Verified, Verifier, star_tree
 
@@ -179,8 +179,7 @@ def solve_rig(
         if fp.solved:
             t2 = time.perf_counter()
             timings["identify"] = (t2 - t1) * 1e3
-            sol = answer(obs, fp.db, fp.obs_rows, fp.cat_rows, np.asarray(fp.db.stars.vec[fp.cat_rows]), fp.matrix,
-                         fp.residuals_arcsec, fp.rms_arcsec, fp.sigma_arcsec, fp.false_prob, "quad")
+            sol = solution_of(*fp.columns, fp.rms_arcsec, fp.sigma_arcsec, fp.false_prob, "quad")
             return _stamped(sol, ["quad"], timings, t0, t2)
         obs.__dict__["_quad_prefetch"] = (plan[0][0], fp.search)
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that

@@ -10,39 +10,88 @@ import numpy as np
 from numba import njit
 
 from .answer import star_mags
-from .attitude import matrix_to_quat, radec_roll
 from .navdb.reader import NavDatabase
 from .types import MatchedStars, Solution, SolveStatus
 from .verify import Observation
 
-def _zeros_list(n: int, _zeros: list[int] = [0] * 256) -> list[int]:  # noqa: B006 (read only)
-    return _zeros[:n] if n <= len(_zeros) else [0] * n
-
-
-def _hips(db: NavDatabase) -> np.ndarray:
+def star_hips(db: NavDatabase) -> np.ndarray:
     """The star table's HIP numbers in memory (once per opened database; indexing the
     memory map costs more)."""
     cache = db.__dict__.setdefault("_cache", {})
     if "hip" not in cache:
-        cache["hip"] = np.array(db.stars.hip)
+        cache["hip"] = np.array(db.stars.hip, dtype=np.int64)
     return cache["hip"]
 
 
+CAMERA_SHIFT = 32
+"""A pair's sort key is ``camera << CAMERA_SHIFT | centroid index``."""
+
+
 @njit(cache=True, nogil=True)
-def _star_columns(ref: np.ndarray, order: np.ndarray, mag: np.ndarray, cat: np.ndarray,
-                  residuals_arcsec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """RA and Dec (deg) of the catalogue directions ``ref[order]``, the stars' magnitudes and
-    the residuals (arcsec, ``residuals_arcsec[order]``), rounded as the answer reports them."""
-    n = len(order)
-    ra = np.empty(n)
-    dec = np.empty(n)
-    res = np.empty(n)
+def answer_columns(matrix: np.ndarray, ref: np.ndarray, key: np.ndarray, cat: np.ndarray, mag: np.ndarray,
+                   hip: np.ndarray, residuals_arcsec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Everything an answer reports, as two arrays (one compiled call: the first pass makes it
+    inside its own, the general path from :func:`answer`).
+
+    Pairs are ordered by ``key`` (camera, then centroid index; see ``CAMERA_SHIFT``); ``ref``
+    holds their catalogue directions (ICRS, as reported) and ``cat`` their catalogue rows.
+    Returns ``ints`` = centroid indices, HIPs and cameras (n each) and ``floats`` = the
+    quaternion ``[w, x, y, z]`` (``w >= 0``, Shepperd's method), boresight RA, Dec and roll
+    (deg, RA in [0, 360), roll from north through east), then RA, Dec (deg), magnitude and
+    residual (arcsec) per star (n each; magnitude and residual rounded to 3 decimals).
+    """
+    n = len(key)
+    order = np.argsort(key, kind="mergesort")
+    ints = np.empty(3 * n, np.int64)
+    floats = np.empty(7 + 4 * n)
+    low = (1 << CAMERA_SHIFT) - 1
     for i in range(n):
-        v = ref[order[i]]
-        ra[i] = math.degrees(math.atan2(v[1], v[0]) % (2 * math.pi))
-        dec[i] = math.degrees(math.asin(min(max(v[2], -1.0), 1.0)))
-        res[i] = residuals_arcsec[order[i]]
-    return ra, dec, np.round(mag[cat], 3), np.round(res, 3)
+        k = order[i]
+        ints[i] = key[k] & low
+        ints[n + i] = hip[cat[k]]
+        ints[2 * n + i] = key[k] >> CAMERA_SHIFT
+        x, y, z = ref[k, 0], ref[k, 1], ref[k, 2]
+        floats[7 + i] = math.degrees(math.atan2(y, x) % (2 * math.pi))
+        floats[7 + n + i] = math.degrees(math.asin(min(max(z, -1.0), 1.0)))
+        floats[7 + 2 * n + i] = mag[cat[k]]
+        floats[7 + 3 * n + i] = residuals_arcsec[k]
+    floats[7 + 2 * n:] = np.round(floats[7 + 2 * n:], 3)
+    _quaternion(matrix, floats)
+    _boresight(matrix, floats)
+    return ints, floats
+
+
+@njit(cache=True, nogil=True)
+def _quaternion(r: np.ndarray, out: np.ndarray) -> None:
+    """``out[0:4]`` = the unit quaternion of ``r`` (as :func:`~.attitude.matrix_to_quat`)."""
+    tr = r[0, 0] + r[1, 1] + r[2, 2]
+    best = max(tr, r[0, 0], r[1, 1], r[2, 2])
+    if best == tr:
+        s = math.sqrt(1.0 + tr) * 2
+        w, x, y, z = 0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s
+    elif best == r[0, 0]:
+        s = math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
+        w, x, y, z = (r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s
+    elif best == r[1, 1]:
+        s = math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
+        w, x, y, z = (r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s
+    else:
+        s = math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
+        w, x, y, z = (r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s
+    norm = math.sqrt(w * w + x * x + y * y + z * z) * (-1.0 if w < 0 else 1.0)
+    out[0], out[1], out[2], out[3] = w / norm, x / norm, y / norm, z / norm
+
+
+@njit(cache=True, nogil=True)
+def _boresight(r: np.ndarray, out: np.ndarray) -> None:
+    """``out[4:7]`` = RA, Dec and roll (deg) of ``r`` (as :func:`~.attitude.radec_roll`)."""
+    up0, up1, up2 = -r[1, 0], -r[1, 1], -r[1, 2]
+    ra = math.atan2(r[2, 1], r[2, 0]) % (2 * math.pi)
+    dec = math.asin(max(-1.0, min(1.0, r[2, 2])))
+    sd, cd, sr, cr = math.sin(dec), math.cos(dec), math.sin(ra), math.cos(ra)
+    north = -sd * cr * up0 - sd * sr * up1 + cd * up2
+    east = -sr * up0 + cr * up1
+    out[4], out[5], out[6] = math.degrees(ra), math.degrees(dec), math.degrees(math.atan2(east, north)) % 360.0
 
 
 def answer(obs: Observation, db: NavDatabase, obs_rows: np.ndarray, cat_rows: np.ndarray, ref: np.ndarray,
@@ -50,27 +99,29 @@ def answer(obs: Observation, db: NavDatabase, obs_rows: np.ndarray, cat_rows: np
            sigma_arcsec: tuple[float, float, float], false_prob: float, method: str) -> Solution:
     """The :class:`Solution` of pairs ``obs_rows`` -> ``cat_rows`` (of ``db``) fitted as
     ``matrix`` (ICRS -> body); ``ref`` the catalogue directions reported per star."""
-    ra, dec, roll = radec_roll(matrix)
-    index = obs.index[obs_rows]
-    if len(obs.cameras) == 1:
-        order = index.argsort(kind="stable")
-        camera = _zeros_list(len(order))
-    else:
-        cam_rows = obs.camera[obs_rows]
-        order = np.lexsort((index, cam_rows))
-        camera = cam_rows[order].tolist()
-    cat = cat_rows[order]
-    star_ra, star_dec, star_mag, star_res = _star_columns(ref, order, star_mags(db), cat, residuals_arcsec)
-    stars = MatchedStars(index[order], _hips(db)[cat], star_ra, star_dec, star_mag, star_res, camera)  # by camera,
-    # then by centroid index; made tuples when first read
-    q = matrix_to_quat(matrix)
+    key = obs.index[obs_rows]
+    if len(obs.cameras) > 1:
+        key = key + (obs.camera[obs_rows] << CAMERA_SHIFT)
+    ints, floats = answer_columns(np.ascontiguousarray(matrix, dtype=np.float64),
+                                  np.ascontiguousarray(ref, dtype=np.float64), key, cat_rows, star_mags(db),
+                                  star_hips(db), np.asarray(residuals_arcsec, dtype=np.float64))
+    return solution_of(ints, floats, rms_arcsec, sigma_arcsec, false_prob, method)
+
+
+def solution_of(ints: np.ndarray, floats: np.ndarray, rms_arcsec: float, sigma_arcsec: tuple[float, float, float],
+                false_prob: float, method: str) -> Solution:
+    """The :class:`Solution` of :func:`answer_columns`' arrays and the fit's figures."""
+    n = len(ints) // 3
+    head = floats[:7].tolist()
+    stars = MatchedStars(ints[:n], ints[n:2 * n], floats[7:7 + n], floats[7 + n:7 + 2 * n],
+                         floats[7 + 2 * n:7 + 3 * n], floats[7 + 3 * n:], ints[2 * n:])  # made tuples when read
     return Solution(
         SolveStatus.SOLVED,
         method,
-        quaternion=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
-        ra_deg=ra,
-        dec_deg=dec,
-        roll_deg=roll,
+        quaternion=(head[0], head[1], head[2], head[3]),
+        ra_deg=head[4],
+        dec_deg=head[5],
+        roll_deg=head[6],
         stars=stars,
         rms_arcsec=rms_arcsec,
         false_match_probability=false_prob,
@@ -78,4 +129,4 @@ def answer(obs: Observation, db: NavDatabase, obs_rows: np.ndarray, cat_rows: np
     )
 
 
-__all__ = ["answer"]
+__all__ = ["answer", "answer_columns", "solution_of", "star_hips"]

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 from .camera import Camera
 from .methods import AUTO_ORDER
-from .methods.capability import cannot_serve, refusal_message, serving
+from .methods.capability import FAILURE_HINTS, cannot_serve, refusal_message, serving
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .types import Centroids, NoSolutionReason, Solution, SolveStatus
 
@@ -98,8 +98,9 @@ def no_solution(method: str, tried: list[str], trials: int, late: bool,
     else:
         reason, why = (NoSolutionReason.NOT_PROVEN,
                        f"{trials} candidate attitude(s) checked, none proven beyond the coincidence bound")
+    hint = f"; {FAILURE_HINTS[method]}" if method in FAILURE_HINTS else ""
     return Solution(SolveStatus.NO_SOLUTION, tried[-1] if tried else method, reason=reason,
-                    methods_tried=ran, message=f"{why} (methods tried: {', '.join(ran) or 'none'})",
+                    methods_tried=ran, message=f"{why} (methods tried: {', '.join(ran) or 'none'}){hint}",
                     timings_ms=timings)
 
 

@@ -295,3 +295,20 @@ def _pinhole_vectors(xy: np.ndarray, cx: float, cy: float, f_px: float) -> np.nd
         v[i, 1] = y / n
         v[i, 2] = 1.0 / n
     return v
+
+
+@njit(cache=True, nogil=True)
+def brightest_first(xy: np.ndarray, flux: np.ndarray, cx: float, cy: float, f_px: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A pinhole frame's stars brightest first: ``(order, xy[order], unit vectors (N, 3) in the
+    camera frame, flux[order])``, ties in input order (one compiled call where the numpy steps
+    took ~4 us a frame)."""
+    order = np.argsort(-flux, kind="mergesort")
+    n = len(order)
+    xy_sorted = np.empty((n, 2))
+    flux_sorted = np.empty(n)
+    for i in range(n):
+        xy_sorted[i, 0] = xy[order[i], 0]
+        xy_sorted[i, 1] = xy[order[i], 1]
+        flux_sorted[i] = flux[order[i]]
+    return order, xy_sorted, _pinhole_vectors(xy_sorted, cx, cy, f_px), flux_sorted

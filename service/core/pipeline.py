@@ -19,7 +19,7 @@ from .answer import compiled_checks, pair_distances, recheck
 from .apparent import aberrate, apparent_directions
 from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
 from .blends import dominant_pairs
-from .camera import Camera
+from .camera import Camera, brightest_first
 from .errors import InvalidInputError, UnknownMethodError
 from .first_pass import deeper_arrays, first_pass
 from .methods import SolveContext, get_matcher, get_method, resolve
@@ -336,14 +336,19 @@ def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: 
     """The stars of every camera as body vectors, brightest first (see :class:`Observation`)."""
     if len(frames) == 1 and len(frames[0][0]):  # one camera, every frame: no concatenation
         cents, cam, _ = frames[0]
-        order = (-np.asarray(cents.flux)).argsort(kind="stable")
-        xy = np.asarray(cents.xy, dtype=np.float64)[order]
-        vec = cam.pixel_to_vector(xy)
+        if cam.distortion:
+            order = (-np.asarray(cents.flux)).argsort(kind="stable")
+            xy = np.asarray(cents.xy, dtype=np.float64)[order]
+            vec, flux = cam.pixel_to_vector(xy), np.asarray(cents.flux, dtype=np.float64)[order]
+        else:
+            order, xy, vec, flux = brightest_first(np.ascontiguousarray(cents.xy, dtype=np.float64),
+                                                   np.ascontiguousarray(cents.flux, dtype=np.float64),
+                                                   float(cam.cx), float(cam.cy), float(cam.f_px))
         if mountings[0] is not _IDENTITY and not np.array_equal(mountings[0], _IDENTITY):
             vec = vec @ mountings[0]
         n = len(order)
-        return Observation(vec, xy, order.astype(np.int64), np.zeros(n, np.int64), (cam,), tuple(mountings),
-                           by_camera=(np.arange(n),), flux=np.asarray(cents.flux)[order])
+        return Observation(vec, xy, order, np.zeros(n, np.int64), (cam,), tuple(mountings), by_camera=(np.arange(n),),
+                           flux=flux)
     vecs, xys, idx, cams, fluxes = [], [], [], [], []
     for c, (cents, cam, _) in enumerate(frames):
         if len(cents) == 0:

@@ -99,3 +99,18 @@ def test_project_rows_is_vector_to_pixel(dist: tuple[float, ...] | None) -> None
     assert 20 < inside.sum() < len(rows)
     np.testing.assert_array_equal(inside, want_inside)
     np.testing.assert_allclose(xy[inside], want_xy[inside], atol=1e-6)
+
+
+def test_brightest_first_orders_and_projects_as_numpy() -> None:
+    from service.core.camera import brightest_first
+
+    cam = Camera.from_fov(12.0, 1024, 768)
+    gen = np.random.default_rng(5)
+    xy = gen.uniform(0, 1000, (40, 2))
+    flux = gen.integers(1, 6, 40).astype(np.float64)  # ties: kept in input order
+    order, xy_sorted, vec, flux_sorted = brightest_first(xy, flux, cam.cx, cam.cy, cam.f_px)
+    want = np.argsort(-flux, kind="stable")
+    np.testing.assert_array_equal(order, want)
+    np.testing.assert_array_equal(xy_sorted, xy[want])
+    np.testing.assert_array_equal(flux_sorted, flux[want])
+    np.testing.assert_allclose(vec, cam.pixel_to_vector(xy[want]), atol=1e-15)

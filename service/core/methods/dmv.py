@@ -52,6 +52,10 @@ docs/methods.md):
   star when none is proven: a database deeper than the camera puts neighbours in the
   catalogue's circle that the frame cannot see, which the dispersion counts as misses (issue
   16: a 6.5 Mv database, seed 003's camera at 6.0 Mv: 38 of 60 frames before, 60 of 60 after).
+  Matched on the observed side only, thousands of catalogue stars tie (their bits cover the
+  few observed ones); the ``MAX_CANDIDATES`` kept are those with the fewest unmatched catalogue
+  neighbours, not the first rows (the issue's database, 12-deg frames to 6.0 Mv with 2 false
+  stars: the true star was in none of the tied lists of the 6 frames lost; 2 lost after).
 """
 
 from __future__ import annotations
@@ -260,7 +264,9 @@ class DmvMatcher:
                 missed += ~hit
             rows = np.flatnonzero((x <= allowed) & (missed <= allowed))
             if len(rows) > MAX_CANDIDATES:  # the least dispersed first
-                rows = rows[np.argsort(x[rows] + missed[rows], kind="stable")[:MAX_CANDIDATES]]
+                # ties (every catalogue star whose bits cover the observed ones, when only the
+                # observed side counts) go to the fewest unmatched catalogue neighbours
+                rows = rows[np.lexsort(((n_cat - b)[rows], x[rows] + missed[rows]))[:MAX_CANDIDATES]]
             return rows
         return np.flatnonzero(x <= allowed)
 

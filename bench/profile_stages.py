@@ -5,8 +5,9 @@
 Solves one simulated frame (the fourth of a seeded set, 2 false stars) again and again and times
 each stage of :func:`service.core.pipeline.solve_rig`'s compiled first pass alone, with
 ``perf_counter`` over ``--repeat`` calls: the search plan, the refusal check, converting the
-input, the compiled call, building the ``Solution``, and the whole ``solve``. A frame solved
-again and again has its data in the caches: a new frame costs more (``bench.profile_default``).
+input, the compiled call, building the ``Solution``, reading its stars (they are made Python
+tuples only when read), and the whole ``solve``. A frame solved again and again has its data in
+the caches: a new frame costs more (``bench.profile_default``).
 """
 
 from __future__ import annotations
@@ -17,7 +18,6 @@ import argparse  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable, Sequence  # noqa: E402
 
-import numpy as np  # noqa: E402
 
 from service.core import pipeline  # noqa: E402
 from service.core.first_pass import first_pass  # noqa: E402
@@ -25,7 +25,7 @@ from service.core.navdb import ensure_default_database, open_database  # noqa: E
 from service.core.presets import PRESETS  # noqa: E402
 from service.core.refusal import refusal  # noqa: E402
 from service.core.sim import SimConfig, simulate_frames  # noqa: E402
-from service.core.solution import answer  # noqa: E402
+from service.core.solution import solution_of  # noqa: E402
 
 
 def _us(fn: Callable[[], object], repeat: int) -> float:
@@ -55,15 +55,16 @@ def main(argv: Sequence[str] | None = None) -> None:
     fp = first_pass(obs, plan[0][0], deepest, args.noise, None, opts.max_false_prob)
     if not fp.solved:
         raise SystemExit("the first pass did not prove this frame; try another --camera or --noise")
-    ref = np.asarray(fp.db.stars.vec[fp.cat_rows])
     rows = [
         ("search plan", lambda: pipeline._search_plan(db, [cam], "auto", args.noise)),
         ("refusal check", lambda: refusal(one, db, "auto", 0.0)),
         ("input to body vectors", lambda: pipeline._observation(one, pipeline._ONE_CAMERA).kernel_arrays),
         ("compiled first pass", lambda: first_pass(obs, plan[0][0], deepest, args.noise, None, opts.max_false_prob)),
-        ("building the Solution", lambda: answer(obs, fp.db, fp.obs_rows, fp.cat_rows, ref, fp.matrix,
-                                                 fp.residuals_arcsec, fp.rms_arcsec, fp.sigma_arcsec,
-                                                 fp.false_prob, "quad")),
+        ("building the Solution", lambda: solution_of(*fp.columns, fp.rms_arcsec, fp.sigma_arcsec, fp.false_prob,
+                                                      "quad")),
+        ("reading its stars (when a caller does)", lambda: tuple(solution_of(*fp.columns, fp.rms_arcsec,
+                                                                             fp.sigma_arcsec, fp.false_prob,
+                                                                             "quad").stars)),
         ("whole solve", lambda: pipeline.solve(frame.centroids, cam, db, options=opts)),
     ]
     print(f"{args.camera}, {args.noise} px, {len(frame.centroids)} centroids, {len(fp.obs_rows)} pairs; "

@@ -85,7 +85,7 @@ def given_column(db: Any, fov: float, px: int, mag: float, frames_n: int, seed: 
     at 0.5 px with 2 false stars."""
     camera = Camera.from_fov(fov, px, px)
     config = SimConfig(mag_limit=mag, centroid_noise_px=NOISE_PX, false_stars=FALSE_STARS)
-    return Column(f"{fov:g} deg, {px} px, frames to {mag:g} Mv", camera, db,
+    return Column(f"{fov:g} deg, {px} px (frames to {mag:g} Mv", camera, db,
                   simulate_frames(camera, frames_n, config, rng=seed))
 
 

@@ -30,6 +30,6 @@ def test_bench_every_method_on_a_given_database(tmp_path: Path) -> None:
                                   "--out", str(tmp_path / "out")])
     assert rc == 0
     rows = json.loads((tmp_path / "out" / "every-method.json").read_text())["rows"]
-    assert {r["camera"] for r in rows} == {"8 deg, 512 px, frames to 6 Mv", "8 deg, 512 px, frames to 5.5 Mv"}
+    assert {r["camera"] for r in rows} == {"8 deg, 512 px (frames to 6 Mv", "8 deg, 512 px (frames to 5.5 Mv"}
     pso = [r for r in rows if r["method"] == "pso"]
     assert all(r["refused"] == 2 for r in pso)

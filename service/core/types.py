@@ -107,6 +107,13 @@ _star_match = functools.partial(tuple.__new__, StarMatch)
 ``_make`` does; ~3x cheaper)."""
 
 
+def _star_dict(centroid: int, hip: int, ra_deg: float, dec_deg: float, mag: float, residual_arcsec: float,
+               camera: int = 0) -> dict[str, Any]:
+    """One identified star in the wire format (the fields of :class:`StarMatch`)."""
+    return {"centroid": centroid, "camera": camera, "hip": hip, "ra_deg": ra_deg, "dec_deg": dec_deg, "mag": mag,
+            "residual_arcsec": residual_arcsec}
+
+
 class MatchedStars(Sequence[StarMatch]):
     """The identified stars of an answer: a read-only sequence of :class:`StarMatch`, kept as
     columns and made into tuples on first read.
@@ -138,6 +145,14 @@ class MatchedStars(Sequence[StarMatch]):
 
     def __len__(self) -> int:
         return len(self._rows) if self._rows is not None else len(self._columns[0])
+
+    def as_dicts(self) -> list[dict[str, Any]]:
+        """The stars as the wire format's dicts, straight from the columns when no tuple was
+        made yet."""
+        if self._rows is not None:
+            return [_star_dict(*s) for s in self._rows]
+        cols = [c.tolist() if isinstance(c, np.ndarray) else c for c in self._columns]
+        return list(map(_star_dict, *cols))
 
     @overload
     def __getitem__(self, i: int) -> StarMatch: ...
@@ -212,18 +227,8 @@ class Solution:
             "ra_deg": num(self.ra_deg),
             "dec_deg": num(self.dec_deg),
             "roll_deg": num(self.roll_deg),
-            "stars": [
-                {
-                    "centroid": s.centroid,
-                    "camera": s.camera,
-                    "hip": s.hip,
-                    "ra_deg": s.ra_deg,
-                    "dec_deg": s.dec_deg,
-                    "mag": s.mag,
-                    "residual_arcsec": s.residual_arcsec,
-                }
-                for s in self.stars
-            ],
+            "stars": self.stars.as_dicts() if isinstance(self.stars, MatchedStars)
+            else [_star_dict(*s) for s in self.stars],
             "rms_arcsec": num(self.rms_arcsec),
             "false_match_probability": num(self.false_match_probability),
             "attitude_sigma_arcsec": None

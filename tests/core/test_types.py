@@ -35,3 +35,13 @@ def test_a_solution_with_it_compares_and_pickles_as_with_the_tuple() -> None:
     assert back == plain and isinstance(back.stars, tuple)
     assert sol.to_dict()["stars"][2] == {"centroid": 7, "camera": 0, "hip": 24436, "ra_deg": 78.63,
                                          "dec_deg": -8.2, "mag": 0.13, "residual_arcsec": 2.0}
+
+
+def test_the_wire_format_is_the_same_before_and_after_the_tuples_are_made() -> None:
+    stars = MatchedStars(*_columns())
+    sol = Solution(SolveStatus.SOLVED, "quad", stars=stars)
+    before = sol.to_dict()["stars"]
+    assert len(stars[:]) == 3  # makes the tuples
+    assert sol.to_dict()["stars"] == before == Solution(SolveStatus.SOLVED, "quad", stars=tuple(stars)).to_dict()["stars"]
+    assert before[0] == {"centroid": 4, "camera": 0, "hip": 32349, "ra_deg": 101.28, "dec_deg": -16.71, "mag": -1.46,
+                         "residual_arcsec": 0.5}

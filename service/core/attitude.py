@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit
 
 from .geometry import angle_between, radec_to_vector
+from .residual_field import field_inflation
 from .types import FloatArray
 
 ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
@@ -127,7 +128,9 @@ def _fit_stats(obs: np.ndarray, ref: np.ndarray, r: np.ndarray,
                sigma_rad: float) -> tuple[np.ndarray, float, np.ndarray]:
     """Compiled body of :func:`estimate`: residuals (arcsec), their RMS, and the 1-sigma
     errors (arcsec) about x, y, z from the information matrix ``sum (I - v v^T)``; a negative
-    ``sigma_rad`` means "from the RMS"."""
+    ``sigma_rad`` means "from the RMS". When the residuals hold a significant low-order field
+    (:func:`~.residual_field.field_inflation`), each axis's 1-sigma also holds the attitude error
+    that field's estimated bias adds."""
     n = len(obs)
     res = np.empty(n)
     info = np.zeros((3, 3))
@@ -153,8 +156,9 @@ def _fit_stats(obs: np.ndarray, ref: np.ndarray, r: np.ndarray,
     det = _det3(info)
     if abs(det) > 1e-12:
         cov = inv3(info, det) * sig * sig
+        gain = field_inflation(obs, ref, r, sig)
         for a in range(3):
-            sd[a] = math.sqrt(max(cov[a, a], 0.0)) * ARCSEC_PER_RAD
+            sd[a] = math.sqrt(max(cov[a, a], 0.0)) * ARCSEC_PER_RAD * gain[a]
     return res, rms, sd
 
 

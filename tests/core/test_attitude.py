@@ -169,3 +169,30 @@ def test_wahba_of_a_reflection_or_two_pairs_falls_back_to_the_svd(rng: np.random
     assert np.linalg.det(r) == pytest.approx(1.0)
     two = wahba_kernel(v[:2], v[:2], np.ones(2))  # rank 2: the SVD's proper rotation (identity)
     np.testing.assert_allclose(two, np.eye(3), atol=1e-9)
+
+
+@pytest.mark.real
+def test_real_image_sigma_ratio_does_not_regress(default_set_db) -> None:
+    """The 38 real centroid lists (matches.json) against their reference solutions, as
+    ``python -m bench.bench_sigma --real`` measures them: std(error / sigma) per axis. Before
+    the residual-field test (docs/attitude.md, "An honest 1-sigma") it was 1.73 / 2.21 / 1.91
+    against truth.json's quaternion and 1.73 / 2.21 / 1.74 against the rigid reference; with
+    it 1.52 / 1.27 / 1.82 and 1.52 / 1.27 / 1.63. The goal, 0.9-1.1, is not met: see there."""
+    from bench.bench_sigma import ratios
+    from bench.common import REAL_DIR, real_frames
+    from bench.real_reference import rigid_references
+    from service.core.pipeline import SolveOptions, solve
+
+    if not (REAL_DIR / "truth.json").is_file():
+        pytest.skip(f"real images absent ({REAL_DIR})")
+    rigid = rigid_references(REAL_DIR)
+    got, got_rigid = [], []
+    for rf in real_frames():
+        sol = solve(rf.centroids, rf.camera, default_set_db, options=SolveOptions(centroid_sigma_px=1.0))
+        assert sol.solved and sol.attitude_sigma_arcsec is not None, rf.name
+        got.append((sol.quaternion, rf.quaternion, sol.attitude_sigma_arcsec))
+        got_rigid.append((sol.quaternion, rigid[rf.name].quaternion, sol.attitude_sigma_arcsec))
+    std, std_rigid = ratios(got).std(axis=0), ratios(got_rigid).std(axis=0)
+    assert len(got) == 38
+    assert np.all(std <= [1.6, 1.35, 1.9]), std
+    assert np.all(std_rigid <= [1.6, 1.35, 1.7]), std_rigid

@@ -1,0 +1,183 @@
+"""Does a fit's residual hold a low-order field, and how much attitude error can it hide?
+
+An unmodelled lens distortion or focal-length error moves every star by a smooth function of
+its position in the field. The rigid attitude fit absorbs the part of that field that looks
+like a rotation (an error that does not average down as ``1/sqrt(n)``) and leaves the rest in
+the residuals. This module fits the residual vectors with the rotation plus a low-order field
+in the camera's tangent plane (focal scale, two linear shears, the six quadratic terms), tests
+the field's significance against the frame's own remaining scatter (an F test, Paulson's
+normal approximation), and when the field is significant returns, per camera axis, the factor
+by which the 1-sigma grows when the field is left free: ``sqrt(C_joint / C_rigid)``.
+
+Frames: camera x = column, y = row, +z boresight; ``v_cam = R v_icrs``. All vectors are unit
+vectors; residuals are in radians.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+FIELD_Z = 2.33
+"""One-sided significance (standard normal deviate, p = 0.01) the field must pass before the
+sigma is widened: white-noise frames are judged systematic about once in a hundred (and then
+widened only by what their estimated bias exceeds)."""
+TERMS_MANY = 9
+"""Field terms (scale, two shears, six quadratic) when the frame has ``MIN_STARS_MANY`` stars."""
+TERMS_FEW = 3
+"""Field terms (scale, two shears) when it has ``MIN_STARS_FEW``."""
+MIN_STARS_MANY = 11
+MIN_STARS_FEW = 6
+
+
+@njit(cache=True, nogil=True)
+def paulson_z(f: float, d1: float, d2: float) -> float:
+    """Standard normal deviate of an F(d1, d2) statistic ``f`` (Paulson's approximation)."""
+    a = 2.0 / (9.0 * d1)
+    b = 2.0 / (9.0 * d2)
+    c = max(f, 0.0) ** (1.0 / 3.0)
+    return ((1.0 - b) * c - (1.0 - a)) / math.sqrt(a + b * c * c)
+
+
+@njit(cache=True, nogil=True)
+def _spd_inverse(m: np.ndarray) -> tuple[bool, np.ndarray]:
+    """Inverse of a symmetric positive-definite matrix by Cholesky; ``(False, m)`` when a pivot
+    falls below 1e-12 of the largest diagonal element (a degenerate design)."""
+    k = m.shape[0]
+    top = 0.0
+    for i in range(k):
+        top = max(top, m[i, i])
+    low = np.zeros((k, k))
+    for j in range(k):
+        s = m[j, j]
+        for p in range(j):
+            s -= low[j, p] * low[j, p]
+        if not s > 1e-12 * top:
+            return False, m
+        low[j, j] = math.sqrt(s)
+        for i in range(j + 1, k):
+            t = m[i, j]
+            for p in range(j):
+                t -= low[i, p] * low[j, p]
+            low[i, j] = t / low[j, j]
+    inv_low = np.zeros((k, k))  # L^-1 by forward substitution
+    for c in range(k):
+        inv_low[c, c] = 1.0 / low[c, c]
+        for i in range(c + 1, k):
+            t = 0.0
+            for p in range(c, i):
+                t -= low[i, p] * inv_low[p, c]
+            inv_low[i, c] = t / low[i, i]
+    out = np.zeros((k, k))
+    for i in range(k):
+        for j in range(k):
+            t = 0.0
+            for p in range(max(i, j), k):
+                t += inv_low[p, i] * inv_low[p, j]
+            out[i, j] = t
+    return True, out
+
+
+@njit(cache=True, nogil=True)
+def _design(m: np.ndarray, rho: float, k: int) -> np.ndarray:
+    """Columns ``(3, 3 + k)`` of one star at camera-frame unit vector ``m``: the three small
+    rotations about x, y, z, then ``k`` field terms (tangent-plane displacements, normalised
+    field radius ``rho``), each projected perpendicular to ``m``."""
+    a = np.zeros((3, 3 + k))
+    a[1, 0], a[2, 0] = -m[2], m[1]
+    a[0, 1], a[2, 1] = m[2], -m[0]
+    a[0, 2], a[1, 2] = -m[1], m[0]
+    x = m[0] / m[2] / rho
+    y = m[1] / m[2] / rho
+    gx = (x, x, y, x * x, x * y, y * y, 0.0, 0.0, 0.0)
+    gy = (y, -y, x, 0.0, 0.0, 0.0, x * x, x * y, y * y)
+    for t in range(k):
+        along = gx[t] * m[0] + gy[t] * m[1]
+        a[0, 3 + t] = gx[t] - along * m[0]
+        a[1, 3 + t] = gy[t] - along * m[1]
+        a[2, 3 + t] = -along * m[2]
+    return a
+
+
+@njit(cache=True, nogil=True)
+def field_fit(obs: np.ndarray, ref: np.ndarray, r: np.ndarray
+              ) -> tuple[bool, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """Rigid and joint (rotation + field) least squares of the residuals of ``obs``
+    (camera-frame unit vectors ``(n, 3)``) against ``r @ ref`` (ICRS unit vectors, ``r`` the
+    ICRS -> camera matrix).
+
+    Returns ``(ok, k, theta_rigid, theta_joint, cov_rigid, cov_joint, ss_rigid, ss_joint)``:
+    ``k`` field terms (0 and ``ok`` False when there are too few stars or the design is
+    degenerate); the small rotations (rad, about camera x, y, z; the joint one's first three
+    entries), their covariances per unit star variance (``(3, 3)`` and ``(3 + k, 3 + k)``), and
+    the residual sums of squares (rad^2) of both fits.
+    """
+    n = len(obs)
+    k = TERMS_MANY if n >= MIN_STARS_MANY else (TERMS_FEW if n >= MIN_STARS_FEW else 0)
+    none = (False, 0, np.zeros(3), np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)), 0.0, 0.0)
+    if k == 0:
+        return none
+    m = np.empty((n, 3))
+    rho = 0.0
+    for i in range(n):
+        for a in range(3):
+            m[i, a] = r[a, 0] * ref[i, 0] + r[a, 1] * ref[i, 1] + r[a, 2] * ref[i, 2]
+        if not m[i, 2] > 1e-6:
+            return none
+        rho = max(rho, math.hypot(m[i, 0] / m[i, 2], m[i, 1] / m[i, 2]))
+    if not rho > 0.0:
+        return none
+    size = 3 + k
+    normal = np.zeros((size, size))
+    rhs = np.zeros(size)
+    ss = 0.0
+    for i in range(n):
+        a = _design(m[i], rho, k)
+        for c in range(3):
+            d = obs[i, c] - m[i, c]
+            ss += d * d
+            for p in range(size):
+                rhs[p] += a[c, p] * d
+                for q in range(p, size):
+                    normal[p, q] += a[c, p] * a[c, q]
+    for p in range(size):
+        for q in range(p):
+            normal[p, q] = normal[q, p]
+    ok_j, cov_j = _spd_inverse(normal)
+    ok_r, cov_r = _spd_inverse(normal[:3, :3].copy())
+    if not (ok_j and ok_r):
+        return none
+    theta_j = cov_j @ rhs
+    theta_r = cov_r @ rhs[:3]
+    return True, k, theta_r, theta_j, cov_r, cov_j, ss - rhs[:3] @ theta_r, ss - rhs @ theta_j
+
+
+@njit(cache=True, nogil=True)
+def field_inflation(obs: np.ndarray, ref: np.ndarray, r: np.ndarray, sigma_rad: float) -> np.ndarray:
+    """Per-axis factors (x, y, z; >= 1) by which a rigid fit's 1-sigma grows for the attitude
+    error a significant residual field can hide.
+
+    Arguments as :func:`field_fit`; ``sigma_rad`` is the per-axis star error the rigid 1-sigma
+    was computed with. The fit with the field left free moves the attitude by ``delta``; under
+    white noise ``delta`` has variance ``(C_joint - C_rigid) s^2`` (``s^2`` the scatter left
+    after the field), so ``b^2 = max(0, delta^2 - (C_joint - C_rigid) s^2)`` estimates the
+    rigid fit's squared bias. The variance becomes ``C_rigid s^2 + b^2`` (the white part from
+    the scatter the field leaves), never less than before:
+    ``gain^2 = max(1, (C_rigid s^2 + b^2) / (C_rigid sigma^2))``. Ones when the field is not
+    significant (``FIELD_Z``), or the frame has too few stars to tell.
+    """
+    gain = np.ones(3)
+    ok, k, theta_r, theta_j, cov_r, cov_j, ss_rigid, ss_joint = field_fit(obs, ref, r)
+    dof = 2 * len(obs) - 3 - k
+    if not (ok and ss_joint > 0.0 and sigma_rad > 0.0):
+        return gain
+    s2 = ss_joint / dof
+    f = ((ss_rigid - ss_joint) / k) / s2
+    if paulson_z(f, float(k), float(dof)) > FIELD_Z:
+        for a in range(3):
+            delta = theta_j[a] - theta_r[a]
+            bias2 = max(delta * delta - (cov_j[a, a] - cov_r[a, a]) * s2, 0.0)
+            gain[a] = math.sqrt(max((cov_r[a, a] * s2 + bias2) / (cov_r[a, a] * sigma_rad * sigma_rad), 1.0))
+    return gain

@@ -81,14 +81,13 @@ def _spd_inverse(m: np.ndarray) -> tuple[bool, np.ndarray]:
 
 
 @njit(cache=True, nogil=True)
-def _design(m: np.ndarray, rho: float, k: int) -> np.ndarray:
-    """Columns ``(3, 3 + k)`` of one star at camera-frame unit vector ``m``: the three small
-    rotations about x, y, z, then ``k`` field terms (tangent-plane displacements, normalised
-    field radius ``rho``), each projected perpendicular to ``m``."""
-    a = np.zeros((3, 3 + k))
-    a[1, 0], a[2, 0] = -m[2], m[1]
-    a[0, 1], a[2, 1] = m[2], -m[0]
-    a[0, 2], a[1, 2] = -m[1], m[0]
+def _design(a: np.ndarray, m: np.ndarray, rho: float, k: int) -> None:
+    """Fill ``a`` ``(3, 3 + k)`` with the columns of one star at camera-frame unit vector ``m``:
+    the three small rotations about x, y, z, then ``k`` field terms (tangent-plane
+    displacements, normalised field radius ``rho``), each projected perpendicular to ``m``."""
+    a[0, 0], a[1, 0], a[2, 0] = 0.0, -m[2], m[1]
+    a[0, 1], a[1, 1], a[2, 1] = m[2], 0.0, -m[0]
+    a[0, 2], a[1, 2], a[2, 2] = -m[1], m[0], 0.0
     x = m[0] / m[2] / rho
     y = m[1] / m[2] / rho
     gx = (x, x, y, x * x, x * y, y * y, 0.0, 0.0, 0.0)
@@ -98,7 +97,6 @@ def _design(m: np.ndarray, rho: float, k: int) -> np.ndarray:
         a[0, 3 + t] = gx[t] - along * m[0]
         a[1, 3 + t] = gy[t] - along * m[1]
         a[2, 3 + t] = -along * m[2]
-    return a
 
 
 @njit(cache=True, nogil=True)
@@ -133,8 +131,9 @@ def field_fit(obs: np.ndarray, ref: np.ndarray, r: np.ndarray
     normal = np.zeros((size, size))
     rhs = np.zeros(size)
     ss = 0.0
+    a = np.empty((3, size))
     for i in range(n):
-        a = _design(m[i], rho, k)
+        _design(a, m[i], rho, k)
         for c in range(3):
             d = obs[i, c] - m[i, c]
             ss += d * d

@@ -69,6 +69,7 @@ from ._pairs import (
     same_handedness,
 )
 from .base import Progress, SolveContext
+from .rig_proof import PairLookup, prove_sparse_rig
 
 SEGMENT_DEG = 1.0
 """Width of the paper's straight-line segments of the pair index."""
@@ -205,6 +206,7 @@ class MultiFovMatcher:
         self.mount_tol = math.radians(mount_tol_arcsec / 3600.0)
         self.vec = db.stars.vec
         self.n_stars = len(db.stars)
+        self.lookup = PairLookup(self.pairs, self.angles, self.max_angle)
 
     # ---- look-ups --------------------------------------------------------------------------
     def ranges(self, lo: np.ndarray, hi: np.ndarray) -> tuple[IntArray, IntArray]:
@@ -249,6 +251,14 @@ class MultiFovMatcher:
 
     # ---- identification ----------------------------------------------------------------------
     def identify(self, ctx: SolveContext) -> Verified | None:
+        found = self._masters(ctx)
+        if found is None and self.mode == "robust" and not ctx.verifier.marginal:
+            # a sparse frame: one triangle across the cameras and every other star (rig_proof)
+            found = prove_sparse_rig(ctx.verifier, self.lookup, ctx.tol_rad, self.mount_tol, ctx.expired)
+        return found
+
+    def _masters(self, ctx: SolveContext) -> Verified | None:
+        """The paper's identification: attempts over master ranks (see the module docstring)."""
         obs = ctx.obs
         cams = [c for c in range(len(obs.cameras)) if len(obs.by_camera[c]) >= 3]
         if not cams:

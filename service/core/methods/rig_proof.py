@@ -1,0 +1,257 @@
+"""Sparse rig frames: one triangle across the cameras, matched to one catalogue triple, proven
+with every other star of the frame (``multifov``'s last resort; issue 16, seed 001's point).
+
+A rig frame of 3-8 stars, e.g. (2, 2) or (1, 3) per camera, has too few stars in any one camera
+for the master vote, and its few extra stars are too few for the verifier's binomial bound
+(one extra star: ``P ~ n_trials * 3e-5``). But the stars of different cameras have known angles
+(through the mounting), so a *base triangle* -- two stars ``i``, ``j`` of one camera and a third
+``k`` of any camera -- is looked up as a pair ``(I, J)`` in the pair table (angle ``d_ij``) and
+every catalogue star ``K`` whose angles to ``I`` and ``J`` match ``d_ik`` and ``d_jk`` (and whose
+triangle has the same handedness): :func:`cross_triples`.
+
+The proof generalises :func:`~service.core.sparse_proof.check_unique_triangle` to rigs and to
+*free* stars (the frame's stars outside the base triangle, ``m_c`` of them in camera ``c``):
+
+- **Consistent.** A catalogue triple is consistent with the frame when the attitude mapping it
+  onto the base triangle explains every free star (a predicted star within the match radius
+  ``r``), predicts no star inside any image (at least ``r`` from its edge) that nobody observed,
+  and predicts at most ``m_c + 1`` stars anywhere in camera ``c``'s image.
+- **Null hypothesis.** The frame is unrelated to the sky. Its base triangle then falls within
+  ``delta`` (the match's largest side mismatch, measured) of a consistent catalogue triple with
+  probability at most ``E = rho_c (2 delta)^3``, ``rho_c`` the density of consistent triples in
+  side space. A free star, unrelated to the sky, lies anywhere in its image: it lands within
+  ``r`` of one of the at most ``m_c + 1`` predicted stars with probability at most
+  ``(m_c + 1) pi r^2 / area_c``. So a triple counts with weight at most
+  ``H = prod_c ((m_c + 1) pi r^2 / area_c)^m_c``, and only if its field predicts no more stars
+  than the frame could explain (``n_inside <= m_c`` and ``n_image <= m_c + 1`` per camera).
+- **Density.** Every catalogue triple within half-width ``W`` of the observed sides (the match
+  left out) is gathered (a random sample of ``SPARSE_MAX_SAMPLE`` when there are more, the
+  thinning factor applied); each is fitted to the base triangle (Wahba, three stars) and its
+  fields are projected into every camera; ``k`` of them satisfy the field condition. Then
+  ``E = thin * k_up * H * (delta / W)^3``, ``k_up`` the Poisson upper bound on ``k`` at
+  ``SPARSE_CONFIDENCE``.
+- **Acceptance.** The consistent match is the only consistent triple of its base triangle, and
+  ``n_looks * E <= max_false_prob`` with ``n_looks`` the number of base triangles the frame
+  offers (all of them, not only those tried).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import gammaincinv
+
+from ..attitude import wahba_svd
+from ..geometry import angle_between, pairwise_angles
+from ..match import _camera_rows
+from ..sparse_proof import SPARSE_CONFIDENCE, SPARSE_MAX_SAMPLE, field_check_kernel
+from ..types import FloatArray, IntArray
+from ..verify import Verified, Verifier, field_grid, star_vec64
+from ._pairs import same_handedness
+
+RIG_SPARSE_MAX_STARS = 8
+"""Frames of at most this many stars (all cameras) are offered to the proof."""
+MAX_BASES = 8
+"""Base triangles tried per frame (the most informative first); ``n_looks`` counts all."""
+MAX_MATCHES = 64
+"""A base triangle with more catalogue triples than this within tolerance is skipped."""
+BOX_START, BOX_MAX, BOX_TARGET = 12.0, 160.0, 2000
+"""Density box: first and largest half-width ``W`` in pattern tolerances, and the number of
+triples aimed at (as ``triangle``'s); ``W`` stays below a quarter of the base pair's side."""
+CHUNK = 512
+"""Catalogue pairs per block when the third star is searched over the whole catalogue."""
+
+
+@dataclass(frozen=True)
+class PairLookup:
+    """The pair table as the proof reads it: ``pairs`` ``(P, 2)`` star rows sorted by ``angles``
+    ``(P,)`` (radians), and the largest angle it holds (radians)."""
+
+    pairs: np.ndarray
+    angles: np.ndarray
+    max_angle: float
+
+    def within(self, lo: float, hi: float) -> IntArray:
+        """Directed catalogue pairs ``(I, J)`` ``(M, 2)`` whose angle lies in ``[lo, hi]`` rad."""
+        s, e = np.searchsorted(self.angles, lo, "left"), np.searchsorted(self.angles, hi, "right")
+        p = np.asarray(self.pairs[s:e], np.int64)
+        return np.concatenate([p, p[:, ::-1]])
+
+
+def cross_triples(lookup: PairLookup, vec: FloatArray, v3: FloatArray, tol: tuple[float, float, float]
+                  ) -> IntArray:
+    """Catalogue triples ``(I, J, K)`` ``(K, 3)`` matching the observed body-frame triangle ``v3``
+    ``(3, 3)`` (rows ``i, j, k``; ``i``, ``j`` in one camera): ``|ij|`` within ``tol[0]`` (pair
+    table), ``|ik|`` within ``tol[1]`` and ``|jk|`` within ``tol[2]`` (every catalogue star tested,
+    in blocks), same handedness. ``vec`` the catalogue's unit vectors; angles in radians."""
+    d = pairwise_angles(v3)
+    ij = lookup.within(d[0, 1] - tol[0], d[0, 1] + tol[0])
+    if len(ij) == 0:
+        return np.zeros((0, 3), np.int64)
+    lo, hi = math.cos(d[0, 2] + tol[1]) - 1e-6, math.cos(max(d[0, 2] - tol[1], 0.0)) + 1e-6
+    vec32 = np.asarray(vec, np.float32)
+    out = []
+    for s in range(0, len(ij), CHUNK):  # |ik| by a float32 product with every star, then exactly
+        blk = ij[s:s + CHUNK]
+        di = vec32[blk[:, 0]] @ vec32.T
+        rows, ks = np.nonzero((di >= lo) & (di <= hi))
+        ok = (np.abs(angle_between(vec[blk[rows, 0]], vec[ks]) - d[0, 2]) <= tol[1]) & \
+             (np.abs(angle_between(vec[blk[rows, 1]], vec[ks]) - d[1, 2]) <= tol[2])
+        out.append(np.column_stack([blk[rows[ok]], ks[ok]]))
+    cat = np.concatenate(out)
+    cat = cat[(cat[:, 2] != cat[:, 0]) & (cat[:, 2] != cat[:, 1])]
+    return cat[same_handedness(vec, v3, cat)] if len(cat) else cat
+
+
+def batch_wahba(obs3: FloatArray, stars: FloatArray, cands: IntArray) -> FloatArray:
+    """ICRS -> body rotations ``(K, 3, 3)`` fitting catalogue triples ``cands`` ``(K, 3)`` onto
+    the observed rows ``obs3`` ``(3, 3)`` (Wahba's problem by SVD, equal weights)."""
+    b = np.einsum("ai,kaj->kij", obs3, stars[cands])  # sum_a o_a c_a^T
+    u, _, vt = np.linalg.svd(b)
+    sign = np.sign(np.linalg.det(u) * np.linalg.det(vt))
+    u[:, :, 2] *= sign[:, None]
+    return u @ vt
+
+
+def field_counts(verifier: Verifier, rs: FloatArray, cands: IntArray, free: IntArray
+                 ) -> tuple[IntArray, IntArray, IntArray, IntArray]:
+    """Per attitude ``rs[k]`` (ICRS -> body) with catalogue triple ``cands[k]``, per camera
+    ``(K, C)``: predicted stars inside the image at least ``r`` from its edge (``inside``),
+    anywhere in the image (``image``), and -- against the observed free stars ``free`` (rows) --
+    those of ``inside`` that no free star is within ``r`` of (``unseen``) and the free stars
+    explained (``explained``). The triple's own stars are never counted."""
+    obs = verifier.obs
+    stars = star_vec64(verifier.db)
+    n_k, n_c = len(rs), len(obs.cameras)
+    out = [np.zeros((n_k, n_c), np.int64) for _ in range(4)]
+    if n_k == 0:
+        return out[0], out[1], out[2], out[3]
+    rs = np.ascontiguousarray(rs, dtype=np.float64)
+    cands = np.ascontiguousarray(cands, dtype=np.int64)
+    cams, dist = _camera_rows(tuple(obs.cameras))
+    none = np.zeros((0, 2))
+    r_px = float(verifier.match_radius_px)
+    for c, cam in enumerate(obs.cameras):
+        half = math.radians(cam.diagonal_fov_deg / 2 + 0.2)
+        g = field_grid(verifier.db, math.degrees(half))
+        mount = np.ascontiguousarray(obs.mountings[c], dtype=np.float64)
+        args = (mount, cams[c], dist[c], stars, 2 * math.sin(half / 2), g.cell, g.n_side, g.keys, g.starts,
+                g.stars, g.columns, 96)
+        mine = free[obs.camera[free] == c]
+        out[0][:, c] = field_check_kernel(rs, cands, *args, none, r_px)[0]
+        out[1][:, c] = field_check_kernel(rs, cands, *args, none, 0.0)[0]
+        if len(mine):
+            xy = np.ascontiguousarray(obs.xy[mine])
+            out[2][:, c], out[3][:, c] = field_check_kernel(rs, cands, *args, xy, r_px)
+        else:
+            out[2][:, c] = out[0][:, c]
+    return out[0], out[1], out[2], out[3]
+
+
+def free_weight(verifier: Verifier, m: IntArray) -> float:
+    """``H = prod_c ((m_c + 1) pi r^2 / area_c)^m_c``: the largest chance that ``m_c`` stars
+    scattered at random over camera ``c``'s image all land within the match radius ``r`` (px)
+    of one of at most ``m_c + 1`` predicted stars, over every camera."""
+    h = 1.0
+    for c, cam in enumerate(verifier.obs.cameras):
+        if m[c]:
+            a = math.pi * verifier.match_radius_px ** 2 / (cam.width * cam.height)
+            h *= min(1.0, (m[c] + 1) * a) ** int(m[c])
+    return h
+
+
+def fits_field(inside: IntArray, image: IntArray, m: IntArray) -> np.ndarray:
+    """Mask of attitudes whose predicted fields a frame of ``m`` ``(C,)`` free stars per camera
+    could explain: at most ``m_c`` inside and ``m_c + 1`` in the image, every camera."""
+    return np.all((inside <= m[None, :]) & (image <= m[None, :] + 1), axis=1)
+
+
+def base_triangles(obs_vec: FloatArray, camera: IntArray, by_camera: tuple[IntArray, ...], tol: float,
+                   max_angle: float) -> list[tuple[int, int, int]]:
+    """Every base triangle ``(i, j, k)`` of the frame (rows): ``i < j`` in one camera, ``4 tol <=
+    |ij| <= max_angle - tol`` (radians), ``k`` any other star; the widest pairs first (they bound
+    the roll best and allow the widest density box), a third star in another camera first."""
+    d = pairwise_angles(obs_vec)
+    bases = []
+    for rows in by_camera:
+        for a, i in enumerate(rows):
+            for j in rows[a + 1:]:
+                if 4 * tol <= d[i, j] <= max_angle - tol:
+                    bases += [(int(i), int(j), k) for k in range(len(obs_vec)) if k not in (i, j)]
+    return sorted(bases, key=lambda b: (-round(float(d[b[0], b[1]]), 6), camera[b[2]] == camera[b[0]], b))
+
+
+def prove_sparse_rig(verifier: Verifier, lookup: PairLookup, tol: float, mount_tol: float,
+                     expired: Callable[[], bool] = lambda: False) -> Verified | None:
+    """Prove a frame of 3-``RIG_SPARSE_MAX_STARS`` stars by a base triangle matched to one
+    consistent catalogue triple (see the module's docstring); ``tol`` the pattern tolerance and
+    ``mount_tol`` the mounting's, radians. Refuses (None) when two base triangles or two triples
+    of one base name different skies."""
+    obs = verifier.obs
+    n = len(obs)
+    if not 3 <= n <= RIG_SPARSE_MAX_STARS:
+        return None
+    stars = star_vec64(verifier.db)
+    bases = base_triangles(obs.vec, obs.camera, obs.by_camera, tol, lookup.max_angle)
+    radius = verifier.match_radius_px * obs.pixel_scale_rad
+    named: dict[int, int] | None = None
+    for i, j, k in bases[:MAX_BASES]:
+        if expired():
+            break
+        tri = np.array([i, j, k])
+        t_k = tol + (mount_tol if obs.camera[k] != obs.camera[i] else 0.0)
+        cat = cross_triples(lookup, stars, obs.vec[tri], (tol, t_k, t_k))
+        if len(cat) == 0 or len(cat) > MAX_MATCHES:
+            continue
+        free = np.setdiff1d(np.arange(n), tri)
+        m = np.bincount(obs.camera[free], minlength=len(obs.cameras))
+        rs = batch_wahba(obs.vec[tri], stars, cat)
+        pred = np.einsum("kij,kaj->kai", rs, stars[cat])  # the triple's stars in the body frame
+        near = np.linalg.norm(pred - obs.vec[tri][None], axis=2) <= radius
+        inside, image, unseen, explained = field_counts(verifier, rs, cat, free)
+        ok = near.all(axis=1) & fits_field(inside, image, m) & (unseen.sum(axis=1) == 0) & \
+            (explained.sum(axis=1) == len(free))
+        if ok.sum() != 1:
+            if ok.sum() > 1:
+                return None  # two skies explain the frame
+            continue
+        m_obs, m_cat, _ = verifier._match_all(rs[np.flatnonzero(ok)[0]])
+        if len(m_obs) != n:
+            continue
+        pairs = dict(zip(m_obs.tolist(), m_cat.tolist(), strict=True))
+        if named is not None and named != pairs:
+            return None
+        named = pairs
+        prob = _bound(verifier, lookup, stars, obs.vec[tri], cat[ok][0], m, tol) * len(bases)
+        if prob <= verifier.max_false_prob:
+            return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), prob, len(bases))
+    return None
+
+
+def _bound(verifier: Verifier, lookup: PairLookup, stars: FloatArray, v3: FloatArray, match: IntArray,
+           m: IntArray, tol: float) -> float:
+    """``E = thin * k_up * H * (delta / W)^3`` for the match ``match`` of the base triangle ``v3``
+    with ``m`` free stars per camera (see the module's docstring)."""
+    delta = float(np.max(np.abs(pairwise_angles(v3) - pairwise_angles(stars[match]))))
+    w_max = float(angle_between(v3[0], v3[1])) / 4
+    w = min(BOX_START * tol, w_max)
+    box = cross_triples(lookup, stars, v3, (w, w, w))
+    if len(box) < BOX_TARGET / 2 and w < w_max:
+        w = min(w * (BOX_TARGET / max(len(box), 8)) ** (1 / 3), w_max, BOX_MAX * tol)
+        box = cross_triples(lookup, stars, v3, (w, w, w))
+    box = box[~np.all(box == match, axis=1)]  # the background around the match, without it
+    thin = 1.0
+    if len(box) > SPARSE_MAX_SAMPLE:  # a random thinning of a Poisson count is Poisson
+        thin = len(box) / SPARSE_MAX_SAMPLE
+        box = box[np.random.default_rng(0).choice(len(box), SPARSE_MAX_SAMPLE, replace=False)]
+    k = 0
+    if len(box):
+        inside, image, _, _ = field_counts(verifier, batch_wahba(v3, stars, box), box, np.zeros(0, np.int64))
+        k = int(np.count_nonzero(fits_field(inside, image, m)))
+    return thin * float(gammaincinv(k + 1, SPARSE_CONFIDENCE)) * free_weight(verifier, m) * (delta / w) ** 3
+
+
+__all__ = ["RIG_SPARSE_MAX_STARS", "PairLookup", "base_triangles", "cross_triples", "prove_sparse_rig"]

@@ -1,0 +1,149 @@
+"""Sparse rig frames (issue 16, seed 001's point): multifov's cross-camera triangle proof
+(``service/core/methods/rig_proof.py``) on GF-7's rig with stars to 5.5 Mv, on a database built
+to that limit: (2, 2), (1, 3) and other 4-5 star splits solved and right, 3-star frames proven
+where a unique triangle proves them, random points and frames missing a star refused."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from service.core.attitude import quat_to_matrix
+from service.core.evaluate import score
+from service.core.methods import get_matcher
+from service.core.methods.rig_proof import cross_triples, free_weight, prove_sparse_rig
+from service.core.navdb import NavDatabase, build_database, open_database
+from service.core.pipeline import SolveOptions, _observation, solve_rig
+from service.core.presets import PRESETS
+from service.core.sim import SimConfig
+from service.core.sim_rig import RigFrame, gf7_rig, random_rig_points, simulate_rig_frames
+from service.core.types import Centroids
+from service.core.verify import Verified, Verifier
+
+MAG = 5.5
+RIG = gf7_rig()
+SIGMA = 0.5
+OPTIONS = SolveOptions(centroid_sigma_px=SIGMA)
+
+
+@pytest.fixture(scope="module")
+def db(tmp_path_factory: pytest.TempPathFactory) -> NavDatabase:
+    path = tmp_path_factory.mktemp("rig55") / "rig55"
+    build_database(path, replace(PRESETS["seed001"], mag_limit=MAG).build_config(("multifov",)))
+    return open_database(path)
+
+
+@pytest.fixture(scope="module")
+def frames() -> list[RigFrame]:
+    return simulate_rig_frames(RIG, 1500, SimConfig(mag_limit=MAG, centroid_noise_px=SIGMA), rng=16)
+
+
+def split(f: RigFrame) -> tuple[int, ...]:
+    return tuple(len(c.hip) for c in f.frames)
+
+
+def correct(sol: object, f: RigFrame) -> bool:
+    return all(score(sol, f.quaternion, c.hip.tolist(), camera=i, blends=c.blends).correct  # type: ignore[arg-type]
+               for i, c in enumerate(f.frames))
+
+
+def prove(db: NavDatabase, inputs: list) -> Verified | None:
+    """The proof alone, with the pipeline's match radius and pattern tolerance at 0.5 px."""
+    obs = _observation(inputs, [quat_to_matrix(np.asarray(q, float)) for _, _, q in inputs])
+    matcher = get_matcher(db, "multifov")
+    tol = (3.0 * math.sqrt(2.0) * SIGMA + 0.5) * obs.pixel_scale_rad
+    return prove_sparse_rig(Verifier(db, obs, match_radius_px=2.5), matcher.lookup, tol, matcher.mount_tol)
+
+
+def test_sparse_splits_solved_and_right(db: NavDatabase, frames: list[RigFrame]) -> None:
+    """Every 4-5 star frame (all real) is identified, right in both cameras; the (2, 2) and
+    (1, 3) splits are among them (before the proof: 0/8 (2, 2), 4/7 (3, 1), 30% of 5 stars)."""
+    sparse = [f for f in frames if sum(split(f)) in (4, 5) and all(np.all(c.hip >= 0) for c in f.frames)]
+    splits = {tuple(sorted(split(f))) for f in sparse}
+    assert {(2, 2), (1, 3)} <= splits
+    for f in sparse:
+        sol = solve_rig(f.inputs(RIG), db, method="multifov", options=OPTIONS)
+        assert sol.solved, split(f)
+        assert correct(sol, f), split(f)
+
+
+def test_three_star_frames_proven_or_refused(db: NavDatabase, frames: list[RigFrame]) -> None:
+    """3-star frames: some proven (a unique triangle across the cameras), none wrong."""
+    three = [f for f in frames if sum(split(f)) == 3]
+    assert len(three) >= 5
+    proven = 0
+    for f in three:
+        found = prove(db, f.inputs(RIG))
+        if found is not None:
+            proven += 1
+            assert found.false_prob <= 1e-5
+            truth = np.concatenate([c.hip for c in f.frames])
+            inputs = f.inputs(RIG)
+            offsets = np.cumsum([0] + [len(c.hip) for c in f.frames])
+            obs = _observation(inputs, [quat_to_matrix(np.asarray(q, float)) for _, _, q in inputs])
+            rows = offsets[obs.camera[found.obs]] + obs.index[found.obs]
+            assert np.array_equal(db.stars.hip[found.cat], truth[rows])
+    assert proven >= 2
+
+
+def test_missing_star_refused(db: NavDatabase, frames: list[RigFrame]) -> None:
+    """A 5-star frame with one star well inside its image taken away: the remaining four fit,
+    but the attitude predicts the missing star, which nobody observed: the proof refuses."""
+    tried = 0
+    for f in frames:
+        if sum(split(f)) != 5 or not all(np.all(c.hip >= 0) for c in f.frames):
+            continue
+        cam = int(np.argmax(split(f)))
+        xy = f.frames[cam].centroids.xy
+        inner = np.flatnonzero(np.all((xy > 20) & (xy < 2028), axis=1))
+        if not len(inner):
+            continue
+        keep = np.ones(len(xy), bool)
+        keep[inner[0]] = False
+        inputs = f.inputs(RIG)
+        c = inputs[cam][0]
+        inputs[cam] = (Centroids(c.xy[keep], c.flux[keep]), inputs[cam][1], inputs[cam][2])
+        assert prove(db, inputs) is None
+        tried += 1
+    assert tried >= 10
+
+
+def test_random_points_refused(db: NavDatabase) -> None:
+    """Random points in both cameras, sparse splits: never identified."""
+    rng = np.random.default_rng(3)
+    splits = [(2, 2), (1, 3), (3, 1), (2, 3), (0, 4), (3, 3), (2, 1), (1, 2)]
+    for t in range(120):
+        pts = random_rig_points(RIG, splits[t % len(splits)], rng)
+        assert not solve_rig(pts, db, method="multifov", options=OPTIONS).solved
+
+
+def test_cross_triples_holds_the_truth(db: NavDatabase, frames: list[RigFrame]) -> None:
+    """A base triangle of two stars of one camera and one of the other: the true catalogue
+    triple is among the matches; its mirror image is not."""
+    matcher = get_matcher(db, "multifov")
+    f = next(f for f in frames if min(split(f)) >= 2 and all(np.all(c.hip >= 0) for c in f.frames))
+    inputs = f.inputs(RIG)
+    obs = _observation(inputs, [quat_to_matrix(np.asarray(q, float)) for _, _, q in inputs])
+    a, b = obs.by_camera[0][:2]
+    k = obs.by_camera[1][0]
+    tri = np.array([a, b, k])
+    hip = [f.frames[obs.camera[r]].hip[obs.index[r]] for r in tri]
+    truth = [int(np.flatnonzero(db.stars.hip == h)[0]) for h in hip]
+    tol = (3.0 * math.sqrt(2.0) * SIGMA + 0.5) * obs.pixel_scale_rad
+    cat = cross_triples(matcher.lookup, db.stars.vec, obs.vec[tri], (tol, tol + matcher.mount_tol, tol + matcher.mount_tol))
+    assert truth in cat.tolist()
+    mirror = obs.vec[tri] * np.array([1.0, 1.0, -1.0])
+    cat = cross_triples(matcher.lookup, db.stars.vec, mirror, (tol, tol + matcher.mount_tol, tol + matcher.mount_tol))
+    assert truth not in cat.tolist()
+
+
+def test_free_weight(db: NavDatabase, frames: list[RigFrame]) -> None:
+    """``H``: one free star in a 2048 x 2048 image at a 2.5-px radius: 2 pi 2.5^2 / 2048^2."""
+    inputs = frames[0].inputs(RIG)
+    obs = _observation(inputs, [quat_to_matrix(np.asarray(q, float)) for _, _, q in inputs])
+    v = Verifier(db, obs, match_radius_px=2.5)
+    assert free_weight(v, np.array([1, 0])) == pytest.approx(2 * math.pi * 6.25 / 2048 ** 2)
+    assert free_weight(v, np.array([0, 0])) == 1.0

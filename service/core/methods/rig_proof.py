@@ -62,7 +62,7 @@ BOX_START, BOX_MAX, BOX_TARGET = 12.0, 160.0, 2000
 """Density box: first and largest half-width ``W`` in pattern tolerances, and the number of
 triples aimed at (as ``triangle``'s); ``W`` stays below a quarter of the base pair's side."""
 CHUNK = 512
-"""Catalogue pairs per block when the third star is searched over the whole catalogue."""
+"""Stars per block of the float32 product that finds each first star's ring of third stars."""
 
 
 @dataclass(frozen=True)
@@ -85,25 +85,43 @@ def cross_triples(lookup: PairLookup, vec: FloatArray, v3: FloatArray, tol: tupl
                   ) -> IntArray:
     """Catalogue triples ``(I, J, K)`` ``(K, 3)`` matching the observed body-frame triangle ``v3``
     ``(3, 3)`` (rows ``i, j, k``; ``i``, ``j`` in one camera): ``|ij|`` within ``tol[0]`` (pair
-    table), ``|ik|`` within ``tol[1]`` and ``|jk|`` within ``tol[2]`` (every catalogue star tested,
-    in blocks), same handedness. ``vec`` the catalogue's unit vectors; angles in radians."""
+    table), ``|ik|`` within ``tol[1]`` and ``|jk|`` within ``tol[2]`` (every catalogue star
+    tested), same handedness. ``vec`` the catalogue's unit vectors; angles in radians."""
     d = pairwise_angles(v3)
     ij = lookup.within(d[0, 1] - tol[0], d[0, 1] + tol[0])
     if len(ij) == 0:
         return np.zeros((0, 3), np.int64)
+    # every star K at |ik| from each distinct I (a float32 product with the catalogue, in
+    # blocks of I), then each pair (I, J) reads its I's ring and keeps the K at |jk| from J
     lo, hi = math.cos(d[0, 2] + tol[1]) - 1e-6, math.cos(max(d[0, 2] - tol[1], 0.0)) + 1e-6
-    vec32 = np.asarray(vec, np.float32)
-    out = []
-    for s in range(0, len(ij), CHUNK):  # |ik| by a float32 product with every star, then exactly
-        blk = ij[s:s + CHUNK]
-        di = vec32[blk[:, 0]] @ vec32.T
-        rows, ks = np.nonzero((di >= lo) & (di <= hi))
-        ok = (np.abs(angle_between(vec[blk[rows, 0]], vec[ks]) - d[0, 2]) <= tol[1]) & \
-             (np.abs(angle_between(vec[blk[rows, 1]], vec[ks]) - d[1, 2]) <= tol[2])
-        out.append(np.column_stack([blk[rows[ok]], ks[ok]]))
-    cat = np.concatenate(out)
+    firsts, which = np.unique(ij[:, 0], return_inverse=True)
+    start, ring_k = _rings(np.asarray(vec, np.float32), firsts, lo, hi)
+    counts = start[which + 1] - start[which]
+    pair = np.repeat(np.arange(len(ij)), counts)
+    ks = ring_k[np.repeat(start[which] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))]
+    lo_j, hi_j = math.cos(d[1, 2] + tol[2]) - 1e-6, math.cos(max(d[1, 2] - tol[2], 0.0)) + 1e-6
+    dj = np.einsum("ij,ij->i", vec[ij[pair, 1]], vec[ks])
+    keep = (dj >= lo_j) & (dj <= hi_j)
+    pair, ks = pair[keep], ks[keep]
+    ok = (np.abs(angle_between(vec[ij[pair, 0]], vec[ks]) - d[0, 2]) <= tol[1]) & \
+         (np.abs(angle_between(vec[ij[pair, 1]], vec[ks]) - d[1, 2]) <= tol[2])
+    cat = np.column_stack([ij[pair[ok]], ks[ok]])
     cat = cat[(cat[:, 2] != cat[:, 0]) & (cat[:, 2] != cat[:, 1])]
     return cat[same_handedness(vec, v3, cat)] if len(cat) else cat
+
+
+def _rings(vec32: np.ndarray, firsts: IntArray, lo: float, hi: float) -> tuple[IntArray, IntArray]:
+    """The stars whose cosine to star ``firsts[u]`` lies in ``[lo, hi]``, as ``ring[start[u]:
+    start[u + 1]]`` (``start``, ``ring``); a float32 product with the catalogue in blocks."""
+    rows, ks = [], []
+    for s in range(0, len(firsts), CHUNK):
+        dots = vec32[firsts[s:s + CHUNK]] @ vec32.T
+        r, k = np.nonzero((dots >= lo) & (dots <= hi))
+        rows.append(r + s)
+        ks.append(k)
+    start = np.zeros(len(firsts) + 1, np.int64)
+    start[1:] = np.cumsum(np.bincount(np.concatenate(rows), minlength=len(firsts)))
+    return start, np.concatenate(ks)
 
 
 def batch_wahba(obs3: FloatArray, stars: FloatArray, cands: IntArray) -> FloatArray:

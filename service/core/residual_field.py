@@ -128,22 +128,15 @@ def field_fit(obs: np.ndarray, ref: np.ndarray, r: np.ndarray
     if not rho > 0.0:
         return none
     size = 3 + k
-    normal = np.zeros((size, size))
-    rhs = np.zeros(size)
-    ss = 0.0
-    a = np.empty((3, size))
+    design = np.empty((3 * n, size))  # the stacked design, so the normal equations are one BLAS
+    resid = np.empty(3 * n)  # product each (the loop over star x term pairs took ~4 us of 5.4)
     for i in range(n):
-        _design(a, m[i], rho, k)
+        _design(design[3 * i:3 * i + 3], m[i], rho, k)
         for c in range(3):
-            d = obs[i, c] - m[i, c]
-            ss += d * d
-            for p in range(size):
-                rhs[p] += a[c, p] * d
-                for q in range(p, size):
-                    normal[p, q] += a[c, p] * a[c, q]
-    for p in range(size):
-        for q in range(p):
-            normal[p, q] = normal[q, p]
+            resid[3 * i + c] = obs[i, c] - m[i, c]
+    normal = design.T @ design
+    rhs = design.T @ resid
+    ss = resid @ resid
     ok_j, cov_j = _spd_inverse(normal)
     ok_r, cov_r = _spd_inverse(normal[:3, :3].copy())
     if not (ok_j and ok_r):

@@ -10,8 +10,9 @@ sparse proof alone (``rig_proof.prove_sparse_rig``), which the pipeline does not
 frames of fewer than 4 stars (``pipeline.SPARSE_PROOF_METHODS``).
 
 ``--db rig`` builds (in a temporary directory) the rig camera's own database: seed 001's
-preset at ``--mag-limit`` with multifov and triangle; ``--db default`` is the default set
-(which holds no multifov); any other value is a database path.
+preset at ``--mag-limit`` with multifov and triangle, ``--db seed001`` the preset as it is (6.5
+Mv: deeper than frames to 5.5); ``--db default`` is the default set (which holds no
+multifov); any other value is a database path.
 
 GF-7's two cameras (8.9 x 8.9 deg, 2048 x 2048, axes 70 deg apart), stars to ``--mag-limit``,
 body attitudes uniform on SO(3). Frames are tallied by the total number of real stars across
@@ -81,9 +82,11 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--missing", type=float, default=0.0)
     ap.add_argument("--random", type=int, default=0)
     args = ap.parse_args(argv)
-    if args.db == "rig":
-        path = Path(tempfile.mkdtemp(prefix="bench-rig-")) / "rig"
-        preset = replace(PRESETS["seed001"], mag_limit=args.mag_limit)
+    if args.db in ("rig", "seed001"):
+        path = Path(tempfile.mkdtemp(prefix="bench-rig-")) / args.db
+        preset = PRESETS["seed001"]
+        if args.db == "rig":
+            preset = replace(preset, mag_limit=args.mag_limit)
         build_database(path, preset.build_config(("multifov", "triangle")))
     else:
         path = ensure_default_database() if args.db == "default" else Path(args.db)

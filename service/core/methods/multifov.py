@@ -43,7 +43,10 @@ Where the paper is vague or weak we chose:
   the triangles fail;
 - ``r`` = 0.5 deg (centroid noise and blends make shorter sides uninformative) and ``R`` = the
   camera's field side;
-- a single-camera frame uses the distance triangle alone.
+- a single-camera frame uses the distance triangle alone;
+- a frame of 3-8 stars the masters do not solve (``robust``: e.g. (2, 2) or (1, 3) stars per
+  camera, no camera with three for the vote) is proven by one triangle across the cameras and
+  every other star (:mod:`.rig_proof`).
 """
 
 from __future__ import annotations

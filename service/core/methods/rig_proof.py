@@ -32,7 +32,12 @@ The proof generalises :func:`~service.core.sparse_proof.check_unique_triangle` t
   ``SPARSE_CONFIDENCE``.
 - **Acceptance.** The consistent match is the only consistent triple of its base triangle, and
   ``n_looks * E <= max_false_prob`` with ``n_looks`` the number of base triangles the frame
-  offers (all of them, not only those tried) times the number of skies.
+  offers (all of them, not only those tried) times the number of skies and of slacks.
+- **Slack.** A frame of 4 or more stars is also tested allowing one star unexplained (a false
+  star: ``H`` sums over which free star it is) or one predicted star unseen (a missed detection:
+  ``m_c + 2`` predicted stars, and one beyond ``m_c`` inside the images, in the box's test as in
+  the match's). Each is a test of its own in ``n_looks``; a looser test is tried only when the
+  stricter found no consistent triple.
 - **Skies.** "Predicts no unseen star" needs a catalogue no deeper than the camera. The frame's
   limit is unknown, so every test is made against the database's stars to its limit and to
   ``LIMIT_STEPS`` magnitudes brighter (:func:`sky_limits`); each is a test of its own, and all
@@ -45,6 +50,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.special import gammaincinv
@@ -220,22 +226,39 @@ def sky_limits(db: NavDatabase) -> list[Sky]:
     return cache["rig_skies"]
 
 
-def free_weight(verifier: Verifier, m: IntArray) -> float:
-    """``H = prod_c ((m_c + 1) pi r^2 / area_c)^m_c``: the largest chance that ``m_c`` stars
-    scattered at random over camera ``c``'s image all land within the match radius ``r`` (px)
-    of one of at most ``m_c + 1`` predicted stars, over every camera."""
-    h = 1.0
+class Slack(NamedTuple):
+    """What a consistent match may leave: ``false`` observed stars unexplained (false stars),
+    ``missed`` predicted stars inside an image unseen (missed detections)."""
+
+    false: int = 0
+    missed: int = 0
+
+
+SLACKS = (Slack(0, 0), Slack(1, 0), Slack(0, 1))
+"""Tests made of a frame of 4 or more stars, in turn (each counts in ``n_looks``)."""
+
+
+def free_weight(verifier: Verifier, m: IntArray, slack: Slack = Slack()) -> float:
+    """The largest chance that ``m_c`` stars scattered at random over camera ``c``'s image land
+    within the match radius ``r`` (px) of one of at most ``m_c + 1 + missed`` predicted stars,
+    every camera: ``H = prod_c ((m_c + 1 + missed) pi r^2 / area_c)^m_c``; with one star allowed
+    to be false, all but one of them (the sum over which one)."""
+    f = np.ones(len(m))
     for c, cam in enumerate(verifier.obs.cameras):
-        if m[c]:
-            a = math.pi * verifier.match_radius_px ** 2 / (cam.width * cam.height)
-            h *= min(1.0, (m[c] + 1) * a) ** int(m[c])
-    return h
+        near = math.pi * verifier.match_radius_px ** 2 / (cam.width * cam.height)  # of the image
+        f[c] = min(1.0, (m[c] + 1 + slack.missed) * near)
+    h = float(np.prod(f ** m))
+    if slack.false:
+        h = sum(float(m[c]) * h / f[c] for c in range(len(m)) if m[c])
+    return min(h, 1.0)
 
 
-def fits_field(inside: IntArray, image: IntArray, m: IntArray) -> np.ndarray:
+def fits_field(inside: IntArray, image: IntArray, m: IntArray, missed: int = 0) -> np.ndarray:
     """Mask of attitudes whose predicted fields a frame of ``m`` ``(C,)`` free stars per camera
-    could explain: at most ``m_c`` inside and ``m_c + 1`` in the image, every camera."""
-    return np.all((inside <= m[None, :]) & (image <= m[None, :] + 1), axis=1)
+    could explain: at most ``m_c + 1 + missed`` stars in each image, and at most ``missed``
+    inside all of them beyond ``m_c`` each."""
+    excess = np.maximum(inside - m[None, :], 0).sum(axis=1)
+    return (excess <= missed) & np.all(image <= m[None, :] + 1 + missed, axis=1)
 
 
 def base_triangles(obs_vec: FloatArray, camera: IntArray, by_camera: tuple[IntArray, ...], tol: float,
@@ -267,62 +290,87 @@ def prove_sparse_rig(verifier: Verifier, lookup: PairLookup, tol: float, mount_t
         return None
     stars = star_vec64(verifier.db)
     bases = base_triangles(obs.vec, obs.camera, obs.by_camera, tol, lookup.max_angle)
-    skies = sky_limits(verifier.db)[:1 if len(obs) == 3 else None]  # a 3-star bound has no room for 4 limits
-    n_looks = len(bases) * len(skies)
-    named: dict[int, int] | None = None
+    skies = sky_limits(verifier.db)[:1 if len(obs) == 3 else None]  # no room for 4 limits in 3 stars
+    slacks = SLACKS if len(obs) >= 4 else SLACKS[:1]
+    n_looks = len(bases) * len(skies) * len(slacks)
+    named: dict[int, int] = {}
     for i, j, k in bases[:MAX_BASES]:
         t_k = tol + (mount_tol if obs.camera[k] != obs.camera[i] else 0.0)
+        tri = np.array([i, j, k])
+        every = cross_triples(lookup, stars, obs.vec[tri], (tol, t_k, t_k))  # each sky holds a subset
+        if len(every) == 0 or len(every) > MAX_MATCHES:
+            continue
         for sky in skies:
             if expired():
                 return None
-            got = _match_base(verifier, lookup, sky, np.array([i, j, k]), (tol, t_k, t_k))
-            if got is None:
+            fit = _fit_field(verifier, sky, tri, every)
+            if fit is None:
                 continue
-            if isinstance(got, str):
-                return None  # two skies explain the frame
-            r, match, m = got
+            picks = [_pick(fit, slack) for slack in slacks]
+            if picks[0] == "ambiguous":
+                return None  # two skies explain the frame (a looser test's two are only skipped)
+            usable = [(sl, p) for sl, p in zip(slacks, picks, strict=True) if isinstance(p, int)]
+            if not usable:
+                continue
+            slack, row = usable[0]
+            r, cat, m = fit[0][row], fit[1][row], fit[2]
             m_obs, m_cat, _ = verifier._match_all(r)
-            if len(m_obs) != len(obs):
+            if len(m_obs) < len(obs) - slack.false or not np.isin(tri, m_obs).all():
                 continue
             pairs = dict(zip(m_obs.tolist(), m_cat.tolist(), strict=True))
-            if named is not None and named != pairs:
+            if not _agree(named, pairs):
                 return None
-            named = pairs
-            prob = _bound(verifier, lookup, sky, obs.vec[[i, j, k]], match, m, tol) * n_looks
+            named.update(pairs)
+            prob = _bound(verifier, lookup, sky, obs.vec[tri], cat, m, tol, slack) * n_looks
             if prob <= verifier.max_false_prob:
                 return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), prob, n_looks)
-            break  # the same stars against a shallower sky prove no more
+            break  # a shallower sky or a looser test proves these stars no better
     return None
 
 
-def _match_base(verifier: Verifier, lookup: PairLookup, sky: Sky, tri: IntArray,
-                tol: tuple[float, float, float]) -> tuple[FloatArray, IntArray, IntArray] | str | None:
-    """The one catalogue triple of ``sky`` (rows of its stars) that
-    matches the base triangle ``tri`` (rows) and is consistent with the frame: its attitude
-    (ICRS -> body), the triple, and the free stars per camera. None if there is none (or too
-    many candidates to look at), ``"ambiguous"`` if two are consistent."""
+def _agree(a: dict[int, int], b: dict[int, int]) -> bool:
+    """True if the pairings ``a`` and ``b`` (observed row -> catalogue row) never give one star
+    two partners."""
+    if any(a.get(o, c) != c for o, c in b.items()):
+        return False
+    back = {c: o for o, c in a.items()}
+    return all(back.get(c, o) == o for o, c in b.items())
+
+
+FieldFit = tuple[FloatArray, IntArray, IntArray, np.ndarray, IntArray, IntArray, IntArray, IntArray]
+
+
+def _fit_field(verifier: Verifier, sky: Sky, tri: IntArray, every: IntArray) -> FieldFit | None:
+    """The catalogue triples ``every`` (database rows) of the base triangle ``tri`` whose stars
+    ``sky`` holds, as its rows, fitted and projected: ``(rs, cat, m, near, inside, image, unseen,
+    explained)`` (see :func:`field_counts`; ``m`` the free stars per camera, ``near`` whether
+    the triple's own stars fit within the match radius). None if ``sky`` holds none of them."""
     obs = verifier.obs
-    cat = cross_triples(lookup, sky.vec, obs.vec[tri], tol, sky.index)
-    if len(cat) == 0 or len(cat) > MAX_MATCHES:
+    cat = sky.index[every]
+    cat = cat[np.all(cat >= 0, axis=1)]
+    if len(cat) == 0:
         return None
     free = np.setdiff1d(np.arange(len(obs)), tri)
     m = np.bincount(obs.camera[free], minlength=len(obs.cameras))
     rs = batch_wahba(obs.vec[tri], sky.vec, cat)
     pred = np.einsum("kij,kaj->kai", rs, sky.vec[cat])  # the triple's stars in the body frame
     near = np.linalg.norm(pred - obs.vec[tri][None], axis=2) <= verifier.match_radius_px * obs.pixel_scale_rad
-    inside, image, unseen, explained = field_counts(verifier, rs, cat, free, sky)
-    ok = near.all(axis=1) & fits_field(inside, image, m) & (unseen.sum(axis=1) == 0) & \
-        (explained.sum(axis=1) == len(free))
+    return (rs, cat, m, near.all(axis=1), *field_counts(verifier, rs, cat, free, sky))
+
+
+def _pick(fit: FieldFit, slack: Slack) -> int | str | None:
+    """The row of the one triple of ``fit`` consistent with the frame under ``slack``; None if
+    there is none, ``"ambiguous"`` if there are two."""
+    _, _, m, near, inside, image, unseen, explained = fit
+    ok = near & fits_field(inside, image, m, slack.missed) & (unseen.sum(axis=1) <= slack.missed) & \
+        (explained.sum(axis=1) >= int(m.sum()) - slack.false)
     if ok.sum() > 1:
         return "ambiguous"
-    if ok.sum() == 0:
-        return None
-    row = int(np.flatnonzero(ok)[0])
-    return rs[row], cat[row], m
+    return int(np.flatnonzero(ok)[0]) if ok.any() else None
 
 
 def _bound(verifier: Verifier, lookup: PairLookup, sky: Sky, v3: FloatArray, match: IntArray,
-           m: IntArray, tol: float) -> float:
+           m: IntArray, tol: float, slack: Slack = Slack()) -> float:
     """``E = thin * k_up * H * (delta / W)^3`` for the match ``match`` of the base triangle ``v3``
     with ``m`` free stars per camera, against ``sky`` (see the module's docstring)."""
     stars = sky.vec
@@ -342,8 +390,9 @@ def _bound(verifier: Verifier, lookup: PairLookup, sky: Sky, v3: FloatArray, mat
     if len(box):
         rs = batch_wahba(v3, stars, box)
         inside, image, _, _ = field_counts(verifier, rs, box, np.zeros(0, np.int64), sky)
-        k = int(np.count_nonzero(fits_field(inside, image, m)))
-    return thin * float(gammaincinv(k + 1, SPARSE_CONFIDENCE)) * free_weight(verifier, m) * (delta / w) ** 3
+        k = int(np.count_nonzero(fits_field(inside, image, m, slack.missed)))
+    k_up = float(gammaincinv(k + 1, SPARSE_CONFIDENCE))
+    return thin * k_up * free_weight(verifier, m, slack) * (delta / w) ** 3
 
 
 __all__ = ["RIG_SPARSE_MAX_STARS", "PairLookup", "Sky", "base_triangles", "cross_triples", "prove_sparse_rig",

@@ -27,7 +27,9 @@ from service.core.verify import Verified, Verifier
 MAG = 5.5
 RIG = gf7_rig()
 SIGMA = 0.5
-OPTIONS = SolveOptions(centroid_sigma_px=SIGMA)
+OPTIONS = SolveOptions(centroid_sigma_px=SIGMA, timeout_ms=5000.0)
+"""A long time limit: a sparse frame takes 30-200 ms, and a test machine shared by other jobs
+must not turn the 500-ms default into a failure."""
 
 
 @pytest.fixture(scope="module")
@@ -104,12 +106,14 @@ def test_three_star_frames_proven_or_refused(db: NavDatabase, frames: list[RigFr
     assert proven >= 2
 
 
-def test_missing_star_refused(db: NavDatabase, frames: list[RigFrame]) -> None:
+def test_missing_star(db: NavDatabase, frames: list[RigFrame]) -> None:
     """A 5-star frame with one star well inside its image taken away: the remaining four fit,
-    but the attitude predicts the missing star, which nobody observed: the proof refuses."""
-    tried = 0
+    but the attitude predicts the missing star, which nobody observed. The strict test refuses
+    it; the test that allows one missed detection (``Slack(missed=1)``, a weaker bound) may
+    prove it, and then names every star right."""
+    tried = proven = 0
     for f in frames:
-        if sum(split(f)) != 5 or not all(np.all(c.hip >= 0) for c in f.frames):
+        if sum(split(f)) != 5:
             continue
         cam = int(np.argmax(split(f)))
         xy = f.frames[cam].centroids.xy
@@ -121,9 +125,48 @@ def test_missing_star_refused(db: NavDatabase, frames: list[RigFrame]) -> None:
         inputs = f.inputs(RIG)
         c = inputs[cam][0]
         inputs[cam] = (Centroids(c.xy[keep], c.flux[keep]), inputs[cam][1], inputs[cam][2])
-        assert prove(db, inputs) is None
+        found = prove(db, inputs)
         tried += 1
+        if found is not None:
+            proven += 1
+            assert named_right(db, inputs, found, f, keep, cam)
     assert tried >= 10
+    assert proven >= tried // 2
+
+
+def test_one_false_star(db: NavDatabase, frames: list[RigFrame]) -> None:
+    """A 4-5 star frame with a false star added to one camera: the test that allows one star
+    unexplained (``Slack(false=1)``) proves some, and names every real star right."""
+    rng = np.random.default_rng(5)
+    tried = proven = 0
+    for f in frames:
+        if sum(split(f)) not in (4, 5):
+            continue
+        cam = int(rng.integers(2))
+        inputs = f.inputs(RIG)
+        c = inputs[cam][0]
+        xy = np.vstack([c.xy, rng.uniform(0, 2047, (1, 2))])
+        inputs[cam] = (Centroids(xy, np.append(c.flux, np.median(c.flux) if len(c.flux) else 1.0)),
+                       inputs[cam][1], inputs[cam][2])
+        found = prove(db, inputs)
+        tried += 1
+        if found is not None:
+            proven += 1
+            hips = [c.hip if i != cam else np.append(c.hip, -1) for i, c in enumerate(f.frames)]
+            obs = _observation(inputs, [quat_to_matrix(np.asarray(q, float)) for _, _, q in inputs])
+            truth = [hips[obs.camera[o]][obs.index[o]] for o in found.obs]
+            assert np.array_equal(db.stars.hip[found.cat], truth)
+    assert tried >= 30
+    assert proven >= tried // 3
+
+
+def named_right(db: NavDatabase, inputs: list, found: Verified, f: RigFrame, keep: np.ndarray,
+                cam: int) -> bool:
+    """Every star ``found`` names is the simulator's (``keep``: the centroids left in ``cam``)."""
+    obs = _observation(inputs, [quat_to_matrix(np.asarray(q, float)) for _, _, q in inputs])
+    hips = [c.hip if i != cam else c.hip[keep] for i, c in enumerate(f.frames)]
+    truth = [hips[obs.camera[o]][obs.index[o]] for o in found.obs]
+    return bool(np.array_equal(db.stars.hip[found.cat], truth))
 
 
 def test_random_points_refused(db: NavDatabase) -> None:

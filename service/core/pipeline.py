@@ -99,11 +99,12 @@ FEW_STARS_BUDGET_MS = 20.0
 """Time the first fallback gets after ``quad`` searched a frame of 5-7 stars exhaustively (it
 proves them in 1-6 ms; see ``QUAD_REFUSE_STARS``)."""
 
-SPARSE_PROOF_METHODS = frozenset({"triangle"})
+SPARSE_PROOF_METHODS = frozenset({"triangle", "multifov"})
 """Methods that can prove a frame of fewer stars than the verifier's ``min_matches`` (4): the
 verifier needs a pair beyond the pattern, so only ``triangle``'s unique-triangle proof
-(``sparse_proof.check_unique_triangle``) names a 3-star frame; the others are skipped on it (seed
-002 at 1.5 px, 3 centroids of which one false: 0.8 -> 0.2 ms median; a true 3-star frame's
+(``sparse_proof.check_unique_triangle``) and ``multifov``'s cross-camera one
+(``methods/rig_proof.py``, 3-star rig frames) name a 3-star frame; the others are skipped on it
+(seed 002 at 1.5 px, 3 centroids of which one false: 0.8 -> 0.2 ms median; a true 3-star frame's
 time is triangle's own, ~12 ms)."""
 
 COMPILED_FIRST_PASS = True

@@ -82,10 +82,10 @@ QUAD_REFUSE_STARS = 8
 """A frame of this many stars up to ``QUERY_STARS`` that ``quad`` searched exhaustively (every
 pattern of its stars, on every member) without a proof is refused without the fallback methods:
 they would search the same stars. Any other frame of 5 stars or more that ``quad`` searched
-exhaustively gets the first fallback alone (``maxangle`` on the default set), on the first
-member of the plan only, for ``FEW_STARS_BUDGET_MS`` (5-7 stars) or ``EXHAUSTED_BUDGET_MS``
-(more than ``QUERY_STARS``; the second member's run proved none of ~450 frames it was given on
-seeds 000-002 at 0.5-2 px and cost 0.5-10 ms each, 0.5 ms on a third of seed 002's frames): one
+exhaustively gets the first fallback alone (``maxangle`` on the default set), on each member,
+for ``FEW_STARS_BUDGET_MS`` (5-7 stars) or ``EXHAUSTED_BUDGET_MS`` (more than ``QUERY_STARS``;
+running it on the first member only saved ~0.3 ms on a third of seed 002's frames but lost 5
+frames in 100,000 of ``bench.bench_wrong``, which a deeper member's pattern stars prove): one
 of 5-7 stars may still be proven by a triangle and two more stars where 4 + 1 is not enough,
 and in one of more than ``QUERY_STARS`` stars bright false detections (branches in a real image)
 can hide the stars from the brightest. The later fallbacks (``pyramid``, ``triangle``) proved 2
@@ -189,14 +189,12 @@ def solve_rig(
     # the coincidence bound is multiplied by
     misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?
     search_deadline = deadline  # shortened after an exhaustive quad miss (EXHAUSTED_BUDGET_MS)
-    fallback_ran = False
     for sigma in sigmas:
         for member, methods in plan:
             if misses and all(misses) and "quad" not in methods:
-                if QUAD_REFUSE_STARS <= len(obs) <= QUERY_STARS or fallback_ran:
+                if QUAD_REFUSE_STARS <= len(obs) <= QUERY_STARS:
                     continue  # fast refusal: the fallbacks would search the same stars (see QUAD_REFUSE_STARS)
-                methods = methods[:1]  # the first fallback alone, on the first member (see QUAD_REFUSE_STARS)
-                fallback_ran = True
+                methods = methods[:1]  # the first fallback alone (maxangle; see QUAD_REFUSE_STARS)
                 budget = EXHAUSTED_BUDGET_MS if len(obs) > QUERY_STARS else FEW_STARS_BUDGET_MS
                 search_deadline = min(search_deadline, time.perf_counter() + budget / 1e3)
             db = member

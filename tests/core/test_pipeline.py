@@ -173,33 +173,6 @@ def test_a_named_method_searches_the_members_that_hold_it(default_set_db) -> Non
     assert "triangle" not in err.value.known and "quad" in err.value.known
 
 
-def test_after_quad_misses_everywhere_the_first_fallback_runs_on_one_member(monkeypatch, default_set_db) -> None:
-    """Random points on seed 000's camera: quad searches every member's patterns and proves
-    nothing; maxangle then runs once, on the plan's first member, not on each (the others'
-    runs proved nothing in ~450 frames and cost 0.5-10 ms each)."""
-    from service.core import pipeline
-
-    pipeline.warm_up(default_set_db)  # its own solves are not this test's
-    calls: list[tuple[str, tuple[str, ...]]] = []
-    identify = pipeline._identify
-
-    def spy(obs, member, methods, *args, **kwargs):  # type: ignore[no-untyped-def]
-        calls.append((member.path.name, tuple(methods)))
-        return identify(obs, member, methods, *args, **kwargs)
-
-    monkeypatch.setattr(pipeline, "_identify", spy)
-    camera = PRESETS["seed000"].camera
-    rng = np.random.default_rng(12)
-    for n in (6, 14, 30):
-        calls.clear()
-        sol = solve(random_points(camera, n, rng), camera, default_set_db, options=SolveOptions(centroid_sigma_px=1.0))
-        assert not sol.solved
-        quad = [m for m, methods in calls if methods == ("quad",)]
-        fallbacks = [(m, methods) for m, methods in calls if methods != ("quad",)]
-        assert len(quad) >= 2  # every member that holds quad was searched
-        assert fallbacks == [(fallbacks[0][0], ("maxangle",))] and fallbacks[0][0] == quad[0]
-
-
 def _compiled_signatures() -> dict[str, int]:
     import sys
 

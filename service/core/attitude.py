@@ -47,26 +47,33 @@ def quat_to_matrix(q: FloatArray) -> FloatArray:
 
 
 def matrix_to_quat(r: FloatArray) -> FloatArray:
-    """Unit quaternion ``[w, x, y, z]`` with ``w >= 0`` of a rotation matrix (Shepperd's method)."""
-    # Python floats: ~5x faster than indexing the array element by element
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(r, dtype=np.float64).tolist()
-    tr = r00 + r11 + r22
-    best = max(tr, r00, r11, r22)
+    """Unit quaternion ``[w, x, y, z]`` with ``w >= 0`` of a rotation matrix (Shepperd's method;
+    :func:`quaternion_into`)."""
+    out = np.empty(7)
+    quaternion_into(np.ascontiguousarray(r, dtype=np.float64), out)
+    return out[:4]
+
+
+@njit(cache=True, nogil=True)
+def quaternion_into(r: np.ndarray, out: np.ndarray) -> None:
+    """``out[0:4]`` = the unit quaternion ``[w, x, y, z]`` (``w >= 0``) of the rotation matrix
+    ``r`` (Shepperd's method). Compiled: the answer's columns make it inside their own call."""
+    tr = r[0, 0] + r[1, 1] + r[2, 2]
+    best = max(tr, r[0, 0], r[1, 1], r[2, 2])
     if best == tr:
         s = math.sqrt(1.0 + tr) * 2
-        q = [0.25 * s, (r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s]
-    elif best == r00:
-        s = math.sqrt(1.0 + r00 - r11 - r22) * 2
-        q = [(r21 - r12) / s, 0.25 * s, (r01 + r10) / s, (r02 + r20) / s]
-    elif best == r11:
-        s = math.sqrt(1.0 + r11 - r00 - r22) * 2
-        q = [(r02 - r20) / s, (r01 + r10) / s, 0.25 * s, (r12 + r21) / s]
+        w, x, y, z = 0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s
+    elif best == r[0, 0]:
+        s = math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
+        w, x, y, z = (r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s
+    elif best == r[1, 1]:
+        s = math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
+        w, x, y, z = (r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s
     else:
-        s = math.sqrt(1.0 + r22 - r00 - r11) * 2
-        q = [(r10 - r01) / s, (r02 + r20) / s, (r12 + r21) / s, 0.25 * s]
-    norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    sign = -1.0 if q[0] < 0 else 1.0
-    return np.array([sign * q[0] / norm, sign * q[1] / norm, sign * q[2] / norm, sign * q[3] / norm])
+        s = math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
+        w, x, y, z = (r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s
+    norm = math.sqrt(w * w + x * x + y * y + z * z) * (-1.0 if w < 0 else 1.0)
+    out[0], out[1], out[2], out[3] = w / norm, x / norm, y / norm, z / norm
 
 
 def quat_multiply(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -111,16 +118,25 @@ def matrix_from_radec_roll(ra_deg: float, dec_deg: float, roll_deg: float) -> Fl
 
 
 def radec_roll(r: FloatArray) -> tuple[float, float, float]:
-    """Boresight RA, Dec and roll (degrees) of an ICRS -> camera matrix. RA in [0, 360)."""
-    _, (u0, u1, u2), (z0, z1, z2) = np.asarray(r, dtype=np.float64).tolist()  # Python floats: ~4x faster
-    up0, up1, up2 = -u0, -u1, -u2
-    ra = math.atan2(z1, z0) % (2 * math.pi)
-    dec = math.asin(max(-1.0, min(1.0, z2)))
+    """Boresight RA, Dec and roll (degrees) of an ICRS -> camera matrix. RA in [0, 360)
+    (:func:`boresight_into`)."""
+    out = np.empty(7)
+    boresight_into(np.ascontiguousarray(r, dtype=np.float64), out)
+    ra, dec, roll = out[4:7].tolist()
+    return ra, dec, roll
+
+
+@njit(cache=True, nogil=True)
+def boresight_into(r: np.ndarray, out: np.ndarray) -> None:
+    """``out[4:7]`` = boresight RA, Dec and roll (deg; RA in [0, 360); roll: the position angle
+    of image-up, -y, from north through east, in [0, 360)) of the ICRS -> camera matrix ``r``."""
+    up0, up1, up2 = -r[1, 0], -r[1, 1], -r[1, 2]
+    ra = math.atan2(r[2, 1], r[2, 0]) % (2 * math.pi)
+    dec = math.asin(max(-1.0, min(1.0, r[2, 2])))
     sd, cd, sr, cr = math.sin(dec), math.cos(dec), math.sin(ra), math.cos(ra)
-    up_north = -sd * cr * up0 - sd * sr * up1 + cd * up2
-    up_east = -sr * up0 + cr * up1
-    roll = math.degrees(math.atan2(up_east, up_north)) % 360.0
-    return math.degrees(ra), math.degrees(dec), roll
+    north = -sd * cr * up0 - sd * sr * up1 + cd * up2
+    east = -sr * up0 + cr * up1
+    out[4], out[5], out[6] = math.degrees(ra), math.degrees(dec), math.degrees(math.atan2(east, north)) % 360.0
 
 
 @njit(cache=True, nogil=True)

@@ -36,7 +36,6 @@ from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
 from .methods.quad_kernel import STATUS_FOUND, quad_search, recheck_pairs
 from .navdb.reader import NavDatabase
 from .solution import answer_columns, star_hips
-from .skygrid import SkyGrid
 from .verify import NEAR_MARGIN_DEG, Observation, Verifier, field_grid, star_vec64
 
 
@@ -191,15 +190,14 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
     field_chord = 2 * math.sin(math.radians(field_deg) / 2)
     has_deep = deepest is not member
     deep = deeper_arrays(member, deepest) if has_deep else _NO_DEEPER
-    near, deep_near = _grid(field_grid(member, near_deg)), (_grid(field_grid(deepest, near_deg)) if has_deep
-                                                           else _NO_GRID)
-    g = field_grid(member, field_deg)
+    near = field_grid(member, near_deg).kernel_args()
+    deep_near = field_grid(deepest, near_deg).kernel_args() if has_deep else _NO_GRID
     strong = min(max_false_prob, Verifier.strong_false_prob)
     static = (QUERY_STARS, tol, qm.patterns, qm.table, qm.ratio_bin, qm.edge_bin, qm.edge_max, qm.star_vec,
               *qm.screen, *near, near_chord, float(radius), float(scale), float(max_false_prob),
               float(Verifier.strong_false_prob), int(Verifier.confirm_patterns), int(Verifier.screen_stars),
               MAX_PROBES, MAX_CHECKS, has_deep, deep.rows, deep.star_vec, *deep_near, float(strong),
-              g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, star_mags(member), star_mags(deepest),
+              *field_grid(member, field_deg).kernel_args(), star_mags(member), star_mags(deepest),
               field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF, star_hips(member),
               star_hips(deepest))
     if len(cache) >= STATIC_CACHE_SIZE:
@@ -215,11 +213,6 @@ _SOLVED_SEARCH = (STATUS_FOUND,)
 """A solved first pass's ``search``: only its status is kept (the answer holds the rest)."""
 _NO_DEEPER = Deeper(np.zeros(0, np.int64), np.zeros((0, 3)))
 _NO_GRID = (1.0, 1, np.zeros(1, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int64), np.zeros(1, np.int64))
-
-
-def _grid(g: SkyGrid) -> tuple[Any, ...]:
-    """A grid's arrays in the order the kernels take them."""
-    return g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns
 
 
 @njit(cache=True, nogil=True)

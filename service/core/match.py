@@ -224,11 +224,10 @@ def _match_rig(r_body: np.ndarray, obs_xy: np.ndarray, star_vec: np.ndarray, nea
         r_cam = mounts[c] @ r_body
         lo, hi = near_off[c], near_off[c + 1]
         cam_vec = np.empty((hi - lo, 3))
-        for j in range(lo, hi):  # scalar reads: a row view would cost an atomic incref/decref a star
-            s = near[j]
-            v0, v1, v2 = star_vec[s, 0], star_vec[s, 1], star_vec[s, 2]
+        for j in range(lo, hi):
+            v = star_vec[near[j]]
             for a in range(3):
-                cam_vec[j - lo, a] = r_cam[a, 0] * v0 + r_cam[a, 1] * v1 + r_cam[a, 2] * v2
+                cam_vec[j - lo, a] = r_cam[a, 0] * v[0] + r_cam[a, 1] * v[1] + r_cam[a, 2] * v[2]
         cam_rows = rows[row_off[c]:row_off[c + 1]]
         po, pc, n_in = _project_and_pair(cam_vec, cams[c, 0], cams[c, 1], cams[c, 2], int(cams[c, 3]),
                                          int(cams[c, 4]), dist[c], obs_xy[cam_rows], radius, crowd)
@@ -247,10 +246,10 @@ def _refine(obs_vec: np.ndarray, obs_xy: np.ndarray, star_vec: np.ndarray, hyp_o
             mounts: np.ndarray, cams: np.ndarray, dist: np.ndarray, rows: np.ndarray, row_off: np.ndarray,
             radius: float, max_refits: int) -> tuple[bool, np.ndarray, np.ndarray, float, np.ndarray]:
     for i in range(len(hyp_obs)):  # quick reject: the hypothesis' own stars must fit
-        s, m = hyp_cat[i], hyp_obs[i]
+        v, o = star_vec[hyp_cat[i]], obs_vec[hyp_obs[i]]
         e2 = 0.0
         for a in range(3):
-            d = r0[a, 0] * star_vec[s, 0] + r0[a, 1] * star_vec[s, 1] + r0[a, 2] * star_vec[s, 2] - obs_vec[m, a]
+            d = r0[a, 0] * v[0] + r0[a, 1] * v[1] + r0[a, 2] * v[2] - o[a]
             e2 += d * d
         if e2 > quick_tol * quick_tol:
             return False, hyp_obs[:0].copy(), hyp_cat[:0].copy(), 1.0, r0

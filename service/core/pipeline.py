@@ -84,7 +84,7 @@ pattern of its stars, on every member) without a proof is refused without the fa
 they would search the same stars. Any other frame of 5 stars or more that ``quad`` searched
 exhaustively gets the first fallback alone (``maxangle`` on the default set), on each member,
 for ``FEW_STARS_BUDGET_MS`` (5-7 stars) or ``EXHAUSTED_BUDGET_MS`` (more than ``QUERY_STARS``;
-running it on the first member only saved ~0.3 ms on a third of seed 002's frames but lost 5
+running it on the first member only saved ~0.3 ms on a third of seed 002's frames but lost 6
 frames in 100,000 of ``bench.bench_wrong``, which a deeper member's pattern stars prove): one
 of 5-7 stars may still be proven by a triangle and two more stars where 4 + 1 is not enough,
 and in one of more than ``QUERY_STARS`` stars bright false detections (branches in a real image)
@@ -598,13 +598,13 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
     # the first pass cannot prove (quad's search on the other members, the fallback). Without
     # these the first such requests compiled them on a fresh install: 4 s, 0.7 s, 1.7 s and 3 s,
     # past the 500 ms time limit.
-    noise = np.random.default_rng(0)
+    rng = np.random.default_rng(0)
     for member in members:
         camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
         frame = _own_frames(member, camera, n_tries=1)[0]
         for n in (len(frame), 4, 3):
             solve(Centroids(frame.xy[:n], frame.flux[:n]), camera, db)
-        solve(Centroids(noise.uniform(0, 1023, (12, 2)), noise.uniform(1, 100, 12)), camera, db)
+        solve(Centroids(rng.uniform(0, 1023, (12, 2)), rng.uniform(1, 100, 12)), camera, db)
 
 
 def _own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centroids]:

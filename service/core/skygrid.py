@@ -56,6 +56,11 @@ class SkyGrid:
     vec: np.ndarray
     columns: np.ndarray
 
+    def kernel_args(self) -> tuple[float, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(cell, n_side, keys, starts, stars, columns)``: the grid as the compiled kernels
+        take it (the star vectors are passed apart)."""
+        return self.cell, self.n_side, self.keys, self.starts, self.stars, self.columns
+
 
 def build_sky_grid(vec: FloatArray, cell_rad: float = DEFAULT_CELL_RAD) -> SkyGrid:
     """Bucket unit vectors ``vec`` ``(N, 3)`` into cells of side ``cell_rad``."""

@@ -10,6 +10,7 @@ import numpy as np
 from numba import njit
 
 from .answer import star_mags
+from .attitude import boresight_into, quaternion_into
 from .navdb.reader import NavDatabase
 from .types import MatchedStars, Solution, SolveStatus
 from .verify import Observation
@@ -56,42 +57,9 @@ def answer_columns(matrix: np.ndarray, ref: np.ndarray, key: np.ndarray, cat: np
         floats[7 + 2 * n + i] = mag[cat[k]]
         floats[7 + 3 * n + i] = residuals_arcsec[k]
     floats[7 + 2 * n:] = np.round(floats[7 + 2 * n:], 3)
-    _quaternion(matrix, floats)
-    _boresight(matrix, floats)
+    quaternion_into(matrix, floats)
+    boresight_into(matrix, floats)
     return ints, floats
-
-
-@njit(cache=True, nogil=True)
-def _quaternion(r: np.ndarray, out: np.ndarray) -> None:
-    """``out[0:4]`` = the unit quaternion of ``r`` (as :func:`~.attitude.matrix_to_quat`)."""
-    tr = r[0, 0] + r[1, 1] + r[2, 2]
-    best = max(tr, r[0, 0], r[1, 1], r[2, 2])
-    if best == tr:
-        s = math.sqrt(1.0 + tr) * 2
-        w, x, y, z = 0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s
-    elif best == r[0, 0]:
-        s = math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
-        w, x, y, z = (r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s
-    elif best == r[1, 1]:
-        s = math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
-        w, x, y, z = (r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s
-    else:
-        s = math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
-        w, x, y, z = (r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s
-    norm = math.sqrt(w * w + x * x + y * y + z * z) * (-1.0 if w < 0 else 1.0)
-    out[0], out[1], out[2], out[3] = w / norm, x / norm, y / norm, z / norm
-
-
-@njit(cache=True, nogil=True)
-def _boresight(r: np.ndarray, out: np.ndarray) -> None:
-    """``out[4:7]`` = RA, Dec and roll (deg) of ``r`` (as :func:`~.attitude.radec_roll`)."""
-    up0, up1, up2 = -r[1, 0], -r[1, 1], -r[1, 2]
-    ra = math.atan2(r[2, 1], r[2, 0]) % (2 * math.pi)
-    dec = math.asin(max(-1.0, min(1.0, r[2, 2])))
-    sd, cd, sr, cr = math.sin(dec), math.cos(dec), math.sin(ra), math.cos(ra)
-    north = -sd * cr * up0 - sd * sr * up1 + cd * up2
-    east = -sr * up0 + cr * up1
-    out[4], out[5], out[6] = math.degrees(ra), math.degrees(dec), math.degrees(math.atan2(east, north)) % 360.0
 
 
 def answer(obs: Observation, db: NavDatabase, obs_rows: np.ndarray, cat_rows: np.ndarray, ref: np.ndarray,

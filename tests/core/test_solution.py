@@ -6,21 +6,25 @@ import math
 import numpy as np
 import pytest
 
-from service.core.attitude import matrix_to_quat, quat_to_matrix, radec_roll, random_rotations
+from service.core.attitude import matrix_from_radec_roll, matrix_to_quat, quat_to_matrix, radec_roll, random_rotations
 from service.core.solution import CAMERA_SHIFT, answer_columns, solution_of
 
 
-def test_quaternion_and_boresight_are_the_python_ones() -> None:
+def test_quaternion_and_boresight_of_the_matrix() -> None:
+    """The quaternion is the one the matrix was made from (w >= 0; the four branches of
+    Shepperd's method), and RA, Dec and roll give the matrix back."""
     rng = np.random.default_rng(8)
-    qs = np.vstack([random_rotations(500, rng), np.eye(4)])  # the four branches of Shepperd's method
+    qs = np.vstack([random_rotations(500, rng), np.eye(4)])
     ref = np.array([[1.0, 0.0, 0.0]])
     for q in qs:
         r = quat_to_matrix(q)
         _, floats = answer_columns(r, ref, np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1),
                                    np.zeros(1, np.int64), np.zeros(1))
-        np.testing.assert_allclose(floats[:4], matrix_to_quat(r), atol=1e-15)
-        ra, dec, roll = radec_roll(r)
-        assert floats[4:7].tolist() == pytest.approx([ra, dec, roll], abs=1e-9)
+        np.testing.assert_allclose(floats[:4], q, atol=1e-12)
+        ra, dec, roll = floats[4:7]
+        assert 0 <= ra < 360 and -90 <= dec <= 90 and 0 <= roll < 360
+        np.testing.assert_allclose(matrix_from_radec_roll(ra, dec, roll), r, atol=1e-9)
+        assert radec_roll(r) == tuple(floats[4:7].tolist()) and matrix_to_quat(r).tolist() == floats[:4].tolist()
 
 
 def test_stars_by_camera_then_centroid_with_their_catalogue_figures() -> None:

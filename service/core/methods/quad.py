@@ -25,7 +25,6 @@ import numpy as np
 from ..catalog import StarTable
 from ..errors import DatabaseCorruptError
 from ..navdb.reader import NavDatabase
-from ..skygrid import build_sky_grid
 from ..verify import NEAR_MARGIN_DEG, Verified, Verifier, field_grid, sky_grid
 from .base import Progress, SolveContext
 from .quad_build import LAYOUT, build_quad_table
@@ -75,7 +74,7 @@ class QuadMatcher:
         self.edge_max = math.radians(float(p["fov_max_deg"]))
         self.star_vec = np.ascontiguousarray(db.stars.vec, dtype=np.float64)
         s = sky_grid(db)
-        self.screen = (s.cell, s.n_side, s.keys, s.starts, s.stars, s.columns)
+        self.screen = s.kernel_args()
 
     def identify(self, ctx: SolveContext) -> Verified | None:
         v = ctx.verifier
@@ -109,10 +108,10 @@ class QuadMatcher:
         cam = obs.cameras[0]
         k = obs.kernel_arrays
         near_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
-        g = field_grid(self.db, near_deg)
+        near_chord = 2 * math.sin(math.radians(near_deg) / 2)
         return quad_search(obs.vec, obs.xy, QUERY_STARS, tol_rad, self.patterns, self.table,
                            self.ratio_bin, self.edge_bin, self.edge_max, self.star_vec, *self.screen,
-                           g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, 2 * math.sin(math.radians(near_deg) / 2), k.mounts, k.cams, k.dist, k.rows, k.row_off,
-                           float(v.match_radius_px), float(obs.pixel_scale_rad), float(v.max_false_prob),
+                           *field_grid(self.db, near_deg).kernel_args(), near_chord, k.mounts, k.cams, k.dist,
+                           k.rows, k.row_off, float(v.match_radius_px), float(obs.pixel_scale_rad), float(v.max_false_prob),
                            float(v.strong_false_prob), int(v.confirm_patterns), int(v.screen_stars),
                            int(v.trials), MAX_PROBES, MAX_CHECKS)

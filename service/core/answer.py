@@ -21,6 +21,8 @@ from numba import njit
 
 from .camera import project_rows
 from .blends import MIN_DELTA_MAG, dominant_kernel
+from .hidden import hidden_kernel, hidden_neighbours
+from .match import CROWD
 from .methods.quad_kernel import recheck_pairs
 from .navdb.reader import NavDatabase
 from .photometry import (FAINT_GATE_MAG, MIN_PAIRS, THRESHOLD_MAG, completeness_kernel, faintest_inverted_kernel,
@@ -58,7 +60,7 @@ def compiled_checks(obs, db: NavDatabase, m_obs: IntArray, m_cat: IntArray, r: n
     o, c, moved = answer_kernel(obs.xy, flux, obs.flux is not None, m_obs, m_cat, np.ascontiguousarray(r),
                                 star_vec64(db), star_mags(db),
                                 g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns, chord, k.mounts[0],
-                                k.cams[0], k.dist[0], float(radius_px), float(sigma_px))
+                                k.cams[0], k.dist[0], float(radius_px), float(sigma_px), *hidden_neighbours(db))
     return o, c, moved
 
 
@@ -132,9 +134,10 @@ def _member(rows: np.ndarray, of: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, cell, n_side, keys, starts, stars,
-                  columns, chord, mount, cam, dist, radius_px, sigma_px):
+                  columns, chord, mount, cam, dist, radius_px, sigma_px, hidden_sep, hidden_limits):
     """``(obs rows, catalogue rows, changed)`` of an answer after the checks of
-    :func:`service.core.pipeline._solution` (blends named, implausible pairs dropped)."""
+    :func:`service.core.pipeline._solution` (blends named, implausible pairs dropped; ``cam[0]``
+    is the focal length, px, and ``hidden_sep, hidden_limits`` :func:`~service.core.hidden.hidden_neighbours`)."""
     r_cam = mount @ r
     rows, pxy = field_stars(r_cam, chord, cell, n_side, keys, starts, stars, columns, star_vec, cam, dist)
     moved = False
@@ -159,7 +162,9 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
     # plausibility: too bright for its catalogue star, fainter than the frame's completeness, or
     # too far from it for the frame's noise
     pair_mag = star_mag[m_cat]
-    bad = distant_kernel(pair_distances(obs_xy, m_obs, m_cat, rows, pxy), pair_mag, sigma_px)
+    d = pair_distances(obs_xy, m_obs, m_cat, rows, pxy)
+    bad = distant_kernel(d, pair_mag, sigma_px)
+    bad |= hidden_kernel(m_cat, d, pair_mag, hidden_sep, hidden_limits, 1.0 / cam[0], CROWD * radius_px)  # left out
     if has_flux:
         bad |= too_bright_kernel(flux[m_obs], pair_mag, THRESHOLD_MAG, MIN_PAIRS)
         bad |= faintest_inverted_kernel(flux[m_obs], pair_mag)

@@ -6,7 +6,8 @@ bright star's to within a fraction of a pixel when the companion is much fainter
 1.5 mag fainter moves the flux-weighted centre by a fifth of their separation). This pass adds
 those pairs to an attitude that is already proven: the blob is named as its brightest star
 when every other catalogue star within the crowding radius is at least ``MIN_DELTA_MAG``
-fainter and no other observed star competes for it.
+fainter and none of them lies farther than ``RESOLVED_PX`` from it (a star the detector would
+have split off: the blob may be that one), and no other observed star competes for it.
 """
 
 from __future__ import annotations
@@ -20,6 +21,13 @@ from .types import FloatArray, IntArray
 
 MIN_DELTA_MAG = 1.5
 """A companion at least this much fainter leaves the blob at the bright star's position."""
+RESOLVED_PX = 2.0
+"""Two catalogue stars farther apart than this (px) are two blobs on the detector (a star
+camera's defocused image is ~1.5-2 px across). A blob within the match radius of two such
+stars may be either of them, so it is not named: at the image border, the bright one's own blob
+can fall off the detector while the faint one stays (the six wrong stars of 100,000 frames of
+``bench.bench_wrong``, session 8: a blob 0.6-6 px from a 5.1-6.4 Mv star named as a 2.8-5.9 Mv
+star 1.1-7 px away, past or at the border)."""
 
 
 def dominant_pairs(obs_xy: FloatArray, free_obs: IntArray, pred_xy: FloatArray, pred_mag: FloatArray,
@@ -74,6 +82,11 @@ def dominant_kernel(obs_xy: np.ndarray, free_obs: np.ndarray, pred_xy: np.ndarra
         crowded = False
         for j in range(len(pred_xy)):
             if j != best and d[j] <= wide and pred_mag[j] - pred_mag[best] < min_delta_mag:
+                crowded = True
+                break
+            # a star the detector splits from the bright one, near the blob too: it may be its image
+            if j != best and d[j] <= wide and math.hypot(pred_xy[j, 0] - pred_xy[best, 0],
+                                                         pred_xy[j, 1] - pred_xy[best, 1]) > RESOLVED_PX:
                 crowded = True
                 break
         if crowded:

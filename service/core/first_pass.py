@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 
 from .answer import FIELD_MARGIN_DEG, answer_kernel, star_mags
+from .hidden import hidden_neighbours
 from .attitude import PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
 from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
@@ -199,7 +200,7 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
               MAX_PROBES, MAX_CHECKS, has_deep, deep.rows, deep.star_vec, *deep_near, float(strong),
               *field_grid(member, field_deg).kernel_args(), star_mags(member), star_mags(deepest),
               field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF, star_hips(member),
-              star_hips(deepest))
+              star_hips(deepest), *hidden_neighbours(member), *hidden_neighbours(deepest))
     if len(cache) >= STATIC_CACHE_SIZE:
         cache.clear()
     cache[key] = (deepest, static)
@@ -222,7 +223,8 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
                       max_false_prob, strong_false_prob, confirm_patterns, screen_stars, max_probes, max_checks,
                       has_deep, deep_rows, d_vec, d_cell, d_side, d_keys, d_starts, d_stars, d_columns, strong,
                       a_cell, a_side, a_keys, a_starts, a_stars, a_columns, mag, d_mag, field_chord,
-                      answer_radius, sigma_px, sigma_rad, prior_dof, hip, d_hip):
+                      answer_radius, sigma_px, sigma_rad, prior_dof, hip, d_hip, hidden, hidden_lim, d_hidden,
+                      d_hidden_lim):
     """The first pass (see the module's docstring). Returns ``(solved, used_deep, ints, floats)``:
     when solved ``ints`` = trials, n, the n observed rows, the n catalogue rows, then
     :func:`~.solution.answer_columns`' ints, and ``floats`` = the matrix (9, row-major),
@@ -238,8 +240,8 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
         ints, floats = _pack_search(search)
         return False, False, ints, floats
     used_deep = False
-    vec, cell, side, keys, starts, stars, columns, mags = star_vec, a_cell, a_side, a_keys, a_starts, a_stars, \
-        a_columns, mag
+    vec, cell, side, keys, starts, stars, columns, mags, hid, hid_lim = star_vec, a_cell, a_side, a_keys, a_starts, \
+        a_stars, a_columns, mag, hidden, hidden_lim
     if has_deep:  # pipeline._refine: the stars the deeper member holds are the hypothesis
         n_known = 0
         for c in m_cat:
@@ -259,11 +261,11 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
                 near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale, trials)
             if ok and d_prob <= strong and len(d_obs) > len(m_obs):
                 m_obs, m_cat, r, prob, used_deep = d_obs, d_cat, d_r, d_prob, True
-                vec, cell, side, keys, starts, stars, columns, mags = d_vec, d_cell, d_side, d_keys, d_starts, \
-                    d_stars, d_columns, d_mag
+                vec, cell, side, keys, starts, stars, columns, mags, hid, hid_lim = d_vec, d_cell, d_side, d_keys, \
+                    d_starts, d_stars, d_columns, d_mag, d_hidden, d_hidden_lim
     m_obs, m_cat, moved = answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, vec, mags, cell, side, keys, starts,
                                         stars, columns, field_chord, mounts[0], cams[0], dist[0], answer_radius,
-                                        sigma_px)
+                                        sigma_px, hid, hid_lim)
     o = obs_vec[m_obs]
     ref = vec[m_cat]
     if moved:

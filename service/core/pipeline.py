@@ -22,6 +22,8 @@ from .blends import dominant_pairs
 from .camera import Camera, brightest_first
 from .errors import InvalidInputError, UnknownMethodError
 from .first_pass import deeper_arrays, first_pass
+from .hidden import hidden_kernel, hidden_neighbours
+from .match import CROWD
 from .methods import SolveContext, get_matcher, get_method, resolve
 from .methods.quad import QUERY_STARS
 from .navdb.reader import NavDatabase, NavDatabaseSet
@@ -401,11 +403,12 @@ FieldStars = list[tuple[np.ndarray, np.ndarray]]
 """Per camera: the catalogue rows predicted inside its image, and their pixel positions."""
 
 
-def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: FieldStars,
+def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: FieldStars, radius_px: float,
                        sigma_px: float = 0.0) -> np.ndarray:
     """Pairs whose observed star is far brighter than its catalogue star, whose catalogue star
-    is fainter than the frame's completeness (see :mod:`service.core.photometry`), or that lie
-    too far from it for the frame's noise (:mod:`service.core.residuals`)."""
+    is fainter than the frame's completeness (see :mod:`service.core.photometry`), that lie
+    too far from it for the frame's noise (:mod:`service.core.residuals`), or near a star the
+    member left out (:mod:`service.core.hidden`)."""
     pair_mag = np.asarray(db.stars.mag[v.cat], dtype=np.float64)
     d = np.full(len(v.obs), np.nan)
     for c, (rows, pxy) in enumerate(field):
@@ -413,6 +416,11 @@ def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: Fi
         if len(mine) and len(rows):
             d[mine] = pair_distances(obs.xy, v.obs[mine], v.cat[mine], rows, pxy)
     bad = distant_pairs(d, pair_mag, sigma_px)
+    hidden, limits = hidden_neighbours(db)
+    for c, cam in enumerate(obs.cameras):
+        mine = np.flatnonzero(obs.camera[v.obs] == c)
+        bad[mine] |= hidden_kernel(v.cat[mine], d[mine], pair_mag[mine], hidden, limits, cam.pixel_scale_rad,
+                                   CROWD * radius_px)
     if obs.flux is not None:
         bad |= too_bright(obs.flux[v.obs], pair_mag) | faintest_inverted(obs.flux[v.obs], pair_mag)
     if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
@@ -482,7 +490,7 @@ def checked_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: flo
     blended = _blend_pairs(obs, db, v, radius_px, field)
     if blended is not None:
         v, moved = blended, True
-    implausible = _implausible_pairs(obs, db, v, field, sigma_px)  # also judges the blends just named
+    implausible = _implausible_pairs(obs, db, v, field, radius_px, sigma_px)  # also judges the blends just named
     if implausible.any():  # false detections paired with faint catalogue stars by position alone
         v = Verified(v.obs[~implausible], v.cat[~implausible], v.matrix, v.false_prob, v.n_trials)
         moved = True

@@ -23,6 +23,17 @@ def test_dominant_pairs_names_a_blob_with_a_much_fainter_companion() -> None:
     assert len(dominant_pairs(crowded, np.array([0]), pred, mag, np.ones(4, bool), 2.5)[0]) == 0
 
 
+def test_dominant_pairs_leaves_a_blob_near_a_resolvable_companion() -> None:
+    """A fainter star 3 px from the bright one is a blob of its own on the detector: a blob within
+    reach of both may be that star's (the bright one's fallen past the border), so it is not
+    named; at 1.9 px the two are one blob and it is."""
+    obs = np.array([[100.0, 100.0]])
+    for offset, named in ((3.0, False), (1.9, True)):
+        pred = np.array([[100.5, 100.0], [100.5 - offset, 100.0]])
+        o, _ = dominant_pairs(obs, np.array([0]), pred, np.array([4.0, 6.0]), np.ones(2, bool), radius_px=2.5)
+        assert (len(o) == 1) == named, offset
+
+
 def test_simulated_blob_of_a_close_double_is_named(default_set_db) -> None:
     """Seed 000's camera (30"/px): frame 162 of a seeded set holds HIP 110991 with HIP 110988
     blended into one blob; the verifier left it out (two candidates within its crowding radius),

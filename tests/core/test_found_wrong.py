@@ -42,6 +42,15 @@ FOUND = [
     ("seed003", 2.0, 5, 0.0, 13318148164082012119, 833, 516),
     ("seed003", 2.0, 5, 0.0, 13318148164082012119, 833, 589),
     ("seed003", 2.0, 5, 0.3, 2272477347409813501, 833, 747),
+    # session 8, `--frames 100000`; service/core/blends.py (RESOLVED_PX) and service/core/hidden.py.
+    # Each time the attitude was right and one blob, 0.6-6 px from a 5.1-6.4 Mv star the frame's member
+    # left out or that sat at the image border, was named as a brighter star 1.1-7 px away.
+    ("seed003", 2.0, 2, 0.3, 10215180794168566637, 833, 790),
+    ("seed003", 2.0, 5, 0.0, 13318148164082012119, 833, 519),
+    ("seed004", 2.0, 0, 0.3, 9735585231734882535, 833, 434),
+    ("seed004", 2.0, 2, 0.3, 11054696670007433002, 833, 643),
+    ("seed004", 2.0, 5, 0.3, 4527235899829268017, 833, 182),
+    ("seed004", 2.0, 5, 0.3, 4527235899829268017, 833, 530),
 ]
 
 

@@ -45,7 +45,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     cells = list(itertools.product(cameras, NOISE, FALSE, MAG_NOISE))
     per_cell = max(1, args.frames // len(cells))
     db = open_database(ensure_default_database())
-    total = solved = 0
+    total = solved = named = 0
     wrong: list[dict[str, object]] = []
     t0 = time.perf_counter()
     for cam_key, noise, false, mag_noise in cells:
@@ -60,6 +60,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                 continue
             n_solved += 1
             s = score(sol, f.quaternion, f.hip.tolist(), blends=f.blends)
+            named += len(sol.stars) - s.wrong_stars
             if not s.correct:
                 wrong.append({"camera": cam_key, "noise_px": noise, "false_stars": false, "mag_noise": mag_noise,
                               "seed": seed, "frames": per_cell, "index": i, "method": sol.method,
@@ -70,8 +71,10 @@ def main(argv: Sequence[str] | None = None) -> None:
         solved += n_solved
         print(f"{cam_key} {noise:g} px {false} false {mag_noise:g} mag: {n_solved}/{per_cell} solved; "
               f"{len(wrong)} wrong so far; {time.perf_counter() - t0:.0f} s", flush=True)
-    print(f"\n{total} frames, {solved} identified ({100 * solved / max(total, 1):.1f}%), {len(wrong)} wrong")
-    common.write_json(common.OUT / "wrong.json", {"frames": total, "solved": solved, "wrong": wrong,
+    print(f"\n{total} frames, {solved} identified ({100 * solved / max(total, 1):.1f}%), {len(wrong)} wrong, "
+          f"{named} stars named right ({named / max(solved, 1):.2f} a frame identified)")
+    common.write_json(common.OUT / "wrong.json", {"frames": total, "solved": solved, "stars_named_right": named,
+                                                  "wrong": wrong,
                                                   "command": common.command_line(["bench.bench_wrong", *(argv or [])])})
 
 

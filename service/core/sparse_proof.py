@@ -31,6 +31,8 @@ SPARSE_CONFIDENCE = 0.95
 """Confidence of the Poisson upper bound on the local density of consistent triangles."""
 SPARSE_MAX_SAMPLE = 3000
 """At most this many catalogue triples of the density box are projected (a random sample)."""
+_K_UP_NONE = float(gammaincinv(1, SPARSE_CONFIDENCE))
+"""The Poisson upper bound at ``SPARSE_CONFIDENCE`` when no box triple is consistent (k = 0)."""
 
 
 def check_unique_triangle(
@@ -38,7 +40,7 @@ def check_unique_triangle(
     obs_idx: IntArray,
     cat_idx: IntArray,
     *,
-    density_box: Callable[[], tuple[IntArray, float]],
+    density_box: Callable[[Callable[[float], bool]], tuple[IntArray, float] | None],
     n_looks: int,
 ) -> Verified | None:
     """Prove a frame too sparse for a fourth star by a triangle that matched one catalogue triple.
@@ -50,9 +52,13 @@ def check_unique_triangle(
     ``|d_cat - d_obs| <= delta`` on all three sides: ``E = rho (2 delta)^3``. A catalogue
     triangle *would produce this frame* when the attitude mapping it onto the observed stars
     predicts no further catalogue star inside the image that nobody observed. The density
-    ``rho`` is estimated from the database: ``density_box()`` gives all catalogue triples (same
-    vertex order and handedness) within a half-width W of the observed sides, and W (radians;
-    called only once the match itself passes, as gathering the box costs milliseconds); with ``k`` of
+    ``rho`` is estimated from the database: ``density_box(worth)`` gives all catalogue triples
+    (same vertex order and handedness) within a half-width W of the observed sides, and W
+    (radians; called only once the match itself passes, as gathering the box costs
+    milliseconds), or None where ``worth(W)`` says no box of that width could prove the match
+    (the bound at ``k = 0`` already exceeds ``max_false_prob``: ``density_box`` asks before each
+    gathering, and the box is projected only when the bound at its own width and thinning
+    passes); with ``k`` of
     them (the match itself left out: given a point of a Poisson process, the others are still
     Poisson) consistent with the frame, ``E = k_up (delta / W)^3``, ``k_up`` the Poisson upper
     bound on ``k`` at ``SPARSE_CONFIDENCE``. Accepted when the match is unique (the caller's
@@ -78,23 +84,34 @@ def check_unique_triangle(
     if not np.all(np.isin(obs_idx, m_obs)):
         return None
     delta = float(np.max(np.abs(pairwise_angles(obs.vec[obs_idx]) - pairwise_angles(stars[cat_idx]))))
-    box_cands, box_halfwidth_rad = density_box()
+    looks = max(n_looks, 1)
+
+    def worth(width: float, thin: float = 1.0) -> bool:
+        """Could a box of half-width ``width`` (rad) prove the match? Its best case, k = 0."""
+        return thin * _K_UP_NONE * (delta / width) ** 3 * looks <= verifier.max_false_prob
+
+    got = density_box(worth)
+    if got is None:
+        return None
+    box_cands, box_halfwidth_rad = got
     box = np.asarray(box_cands, dtype=np.int64).reshape(-1, 3)
     box = box[~np.all(box == cat_idx, axis=1)]  # the background around the match, without it
     thin = 1.0
     if len(box) > SPARSE_MAX_SAMPLE:  # a random thinning of a Poisson count is Poisson
         thin = len(box) / SPARSE_MAX_SAMPLE
         box = box[np.random.default_rng(0).choice(len(box), SPARSE_MAX_SAMPLE, replace=False)]
+    if not worth(box_halfwidth_rad, thin):
+        return None  # the box's projections could only raise the bound
     rs = _sparse_attitudes(obs.vec[obs_idx], stars, box)
     k = 0
     if len(box):
         box_unseen, box_explained = _field_check(verifier, rs, box, obs_idx)
         k = int(np.count_nonzero((box_unseen == 0) & (box_explained >= explained[0])))
     expected = thin * float(gammaincinv(k + 1, SPARSE_CONFIDENCE)) * (delta / box_halfwidth_rad) ** 3
-    prob = min(1.0, expected * max(n_looks, 1))
+    prob = min(1.0, expected * looks)
     if prob > verifier.max_false_prob:
         return None
-    return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), prob, max(n_looks, 1))
+    return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), prob, looks)
 
 
 def _sparse_attitudes(obs_vec: FloatArray, stars: FloatArray, cands: IntArray) -> FloatArray:

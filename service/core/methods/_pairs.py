@@ -158,26 +158,6 @@ def join_triangles(e_ij: np.ndarray, e_ik: np.ndarray, keys_jk: np.ndarray, n_st
     return np.column_stack([a[hit], b[hit], c[hit]])
 
 
-_MIX = np.int64(-7046029254386353131)
-"""0x9E3779B97F4A7C15 (Fibonacci hashing) as a signed 64-bit integer."""
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _slot(key: int, mask: int) -> int:
-    h = key * _MIX
-    return (h ^ (h >> 29)) & mask
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _find(table: np.ndarray, mask: int, key: int) -> int:
-    """The slot of ``key`` in an open-addressing set of positive keys (0: empty), or the empty
-    slot where it would go."""
-    h = _slot(key, mask)
-    while table[h] != 0 and table[h] != key:
-        h = (h + 1) & mask
-    return h
-
-
 @njit(cache=True, nogil=True)
 def _adjacency(pairs: np.ndarray, s: int, e: int, n_stars: int) -> tuple[np.ndarray, np.ndarray]:
     """Rows ``[s, e)`` of ``pairs`` in both orientations grouped by first star (a stable
@@ -203,44 +183,41 @@ def _adjacency(pairs: np.ndarray, s: int, e: int, n_stars: int) -> tuple[np.ndar
 def join_windows(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_ik: int, s_jk: int, e_jk: int,
                  n_stars: int) -> np.ndarray:
     """:func:`join_triangles` of three windows of the pair table (rows ``[s, e)`` of ``pairs``,
-    each taken in both orientations), compiled and without sorting: the ``a-c`` window as an
-    adjacency list by star (a counting sort, stable), the ``b-c`` window as a hash set. The
-    triples come in the order :func:`join_triangles` gives for edges stably sorted by first
-    star: by ``a``, then the ``a-b`` edge's position, then the
-    ``a-c`` edge's. A window of the density box holds tens of thousands of pairs; the
-    vectorised join spent milliseconds in its sorts."""
-    start, adj = _adjacency(pairs, s_ik, e_ik, n_stars)  # a-c, by a
-    # b-c: a set of keys b * n_stars + c (both orientations), open addressing
-    size = 16
-    while size < 4 * (e_jk - s_jk) + 16:
-        size *= 2
-    mask = size - 1
-    table = np.zeros(size, np.int64)
-    for r in range(s_jk, e_jk):
-        for o in range(2):
-            key = pairs[r, o] * n_stars + pairs[r, 1 - o] + 1
-            table[_find(table, mask, key)] = key
+    each taken in both orientations), compiled and without sorting: each window as an adjacency
+    list by star (a counting sort, stable), and ``c`` kept where it is a neighbour of both ``a``
+    (``a-c`` window) and ``b`` (``b-c``; the lists hold ~1-3 stars, so a scan beats a hash
+    probe: 0.7 against 3 ms for windows of 15,000-25,000 pairs). The triples come in the order
+    :func:`join_triangles` gives for edges stably sorted by first star: by ``a``, then the
+    ``a-b`` edge's position, then the ``a-c`` edge's. A window of the density box holds tens of
+    thousands of pairs; the vectorised join spent milliseconds in its sorts."""
+    ac_start, ac_adj = _adjacency(pairs, s_ik, e_ik, n_stars)  # a-c, by a
+    bc_start, bc_adj = _adjacency(pairs, s_jk, e_jk, n_stars)  # b-c, by b
     ab_start, ab_adj = _adjacency(pairs, s_ij, e_ij, n_stars)  # a-b, by a: the stable order by first star
+    out = np.empty((64, 3), np.int64)
     n = 0
-    for sweep in range(2):  # count, then fill (no array reassigned inside the loop)
-        if sweep == 1:
-            out = np.empty((n, 3), np.int64)
-            n = 0
-        else:
-            out = np.empty((0, 3), np.int64)
-        a_of = 0
-        for k in range(len(ab_adj)):
-            while ab_start[a_of + 1] <= k:
-                a_of += 1
-            a, b = a_of, ab_adj[k]
-            for q in range(start[a], start[a + 1]):
-                c = adj[q]
-                if c == b or table[_find(table, mask, b * n_stars + c + 1)] == 0:
-                    continue
-                if sweep == 1:
-                    out[n, 0], out[n, 1], out[n, 2] = a, b, c
-                n += 1
-    return out
+    a_of = 0
+    for k in range(len(ab_adj)):
+        while ab_start[a_of + 1] <= k:
+            a_of += 1
+        a, b = a_of, ab_adj[k]
+        for q in range(ac_start[a], ac_start[a + 1]):
+            c = ac_adj[q]
+            if c == b:
+                continue
+            joined = False
+            for t in range(bc_start[b], bc_start[b + 1]):
+                if bc_adj[t] == c:
+                    joined = True
+                    break
+            if not joined:
+                continue
+            if n == len(out):  # grow by doubling: one sweep, not a count and a fill
+                grown = np.empty((2 * n, 3), np.int64)
+                grown[:n] = out
+                out = grown
+            out[n, 0], out[n, 1], out[n, 2] = a, b, c
+            n += 1
+    return out[:n].copy()
 
 
 def edge_keys(e: np.ndarray, n_stars: int) -> np.ndarray:

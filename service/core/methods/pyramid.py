@@ -24,9 +24,7 @@ from ..verify import Verified
 from ._pairs import (
     PairLimits,
     SharedPairs,
-    directed_edges,
-    edge_keys,
-    join_triangles,
+    join_windows,
     pair_limits,
     pattern_order,
     require_shared,
@@ -77,23 +75,17 @@ class PyramidMatcher:
         v = obs.vec[:n]
         d = pairwise_angles(v)
         tol = ctx.tol_rad
-        edges: dict[tuple[int, int], np.ndarray] = {}
-        keys: dict[tuple[int, int], np.ndarray] = {}
-
-        def edge(i: int, j: int) -> np.ndarray:
-            if (i, j) not in edges:
-                edges[(i, j)] = directed_edges(self.pairs, self.angles, d[i, j] - tol, d[i, j] + tol)
-            return edges[(i, j)]
-
+        # every pair's window of the pair table at once: rows [start, end) within tolerance
+        start = np.searchsorted(self.angles, d - tol, side="left")
+        end = np.searchsorted(self.angles, d + tol, side="right")
         for i, j, k in pattern_order(n):
             if ctx.expired():
                 break
             sides = (d[i, j], d[i, k], d[j, k])
             if max(sides) > self.max_angle - tol or min(sides) < 4 * tol:
                 continue
-            if (j, k) not in keys:
-                keys[(j, k)] = edge_keys(edge(j, k), self.n_stars)
-            cand = join_triangles(edge(i, j), edge(i, k), keys[(j, k)], self.n_stars)
+            cand = join_windows(self.pairs, int(start[i, j]), int(end[i, j]), int(start[i, k]), int(end[i, k]),
+                                int(start[j, k]), int(end[j, k]), self.n_stars)
             if len(cand) == 0:
                 continue
             cand = cand[same_handedness(self.vec, v[[i, j, k]], cand)]

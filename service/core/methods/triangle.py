@@ -34,6 +34,7 @@ from __future__ import annotations
 import functools
 import math
 from itertools import combinations
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -211,12 +212,26 @@ class TriangleMatcher:
 
     def _sparse(self, ctx: SolveContext, unique: list[tuple[np.ndarray, np.ndarray]], n: int,
                 eps: float) -> Verified | None:
-        """Prove a 3-4 star frame by a triangle that matched exactly one catalogue triple."""
+        """Prove a 3-4 star frame by a triangle that matched exactly one catalogue triple.
+
+        Triangles are tried in order of their side mismatch (the smallest gives the smallest
+        bound, all else equal). One whose three stars a proven answer already names the same way
+        is skipped: its proof would name the same sky. Two proofs naming different skies are
+        ambiguous: no answer."""
         n_looks = math.comb(n, 3)
+        vec = self.vec
+        obs_vec = ctx.obs.vec
+
+        def mismatch(tri: tuple[np.ndarray, np.ndarray]) -> float:
+            idx, cat = tri
+            return float(np.max(np.abs(pairwise_angles(obs_vec[idx]) - pairwise_angles(vec[cat]))))
+
         best: Verified | None = None
-        for idx, cat in unique:
+        for idx, cat in sorted(unique, key=mismatch):
+            if best is not None and _names(best, idx, cat):
+                continue
             found = check_unique_triangle(ctx.verifier, idx, cat, n_looks=n_looks,
-                                          density_box=functools.partial(self._density_box, ctx.obs.vec[idx], eps))
+                                          density_box=functools.partial(self._density_box, obs_vec[idx], eps))
             if found is None:
                 continue
             if best is not None and not np.array_equal(np.sort(best.cat), np.sort(found.cat)):
@@ -225,17 +240,29 @@ class TriangleMatcher:
                 best = found
         return best
 
-    def _density_box(self, v: np.ndarray, eps: float) -> tuple[np.ndarray, float]:
+    def _density_box(self, v: np.ndarray, eps: float,
+                     worth: Callable[[float], bool]) -> tuple[np.ndarray, float] | None:
         """Catalogue triples in a box of half-width ``W`` around the observed sides: the sample
         the verifier estimates the local density of consistent triangles from. ``W`` is grown
         until the box holds about ``BOX_TARGET`` triples (the test's power is set by how many
         triples it examines), but stays below a quarter of the shortest side, so that the
-        density is smooth across the box."""
+        density is smooth across the box. None, without gathering, where ``worth(W)`` says no
+        box that wide could prove the match (see ``check_unique_triangle``)."""
         d = pairwise_angles(v)
         w_max = min(d[0, 1], d[0, 2], d[1, 2]) / 4
+        if not worth(min(w_max, max(BOX_START, BOX_MAX) * eps)):
+            return None  # not even the widest box this triangle allows
         w = min(BOX_START * eps, w_max)
         box = self.triples(v, w)
         if len(box) < BOX_TARGET / 2 and w < w_max:
             w = min(w * (BOX_TARGET / max(len(box), 8)) ** (1 / 3), w_max, BOX_MAX * eps)
+            if not worth(w):
+                return None
             box = self.triples(v, w)
         return box, w
+
+
+def _names(v: Verified, obs_idx: np.ndarray, cat_idx: np.ndarray) -> bool:
+    """Does answer ``v`` pair each of the observed rows ``obs_idx`` with ``cat_idx``?"""
+    paired = dict(zip(v.obs.tolist(), v.cat.tolist(), strict=True))
+    return all(paired.get(int(o)) == int(c) for o, c in zip(obs_idx, cat_idx, strict=True))

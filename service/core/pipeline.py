@@ -23,6 +23,7 @@ from .camera import Camera, brightest_first
 from .errors import InvalidInputError, UnknownMethodError
 from .first_pass import deeper_arrays, first_pass
 from .hidden import hidden_kernel, hidden_neighbours
+from .trimmed import trimmed_basin
 from .match import CROWD
 from .methods import SolveContext, get_matcher, get_method, resolve
 from .methods.quad import QUERY_STARS
@@ -502,6 +503,9 @@ def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma
     moved = options.epoch is not None or options.observer_velocity_km_s is not None
     radius = options.match_radius_px or max(2.5, 3.0 * sigma_rad / obs.pixel_scale_rad)
     sigma_px = sigma_rad / obs.pixel_scale_rad
+    trimmed = trimmed_basin(obs, db, v, radius, sigma_px)  # a fit pulled off by a few wrong pairs
+    if trimmed is not None:
+        v, moved = trimmed, True
     checked = compiled_checks(obs, db, v.obs, v.cat, v.matrix, radius, sigma_px)  # one camera: compiled
     if checked is None:
         v, changed = checked_pairs(obs, db, v, radius, sigma_px)

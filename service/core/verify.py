@@ -276,16 +276,19 @@ class Verifier:
                                         factor * self.match_radius_px, crowd=1.0)
             if len(w_obs) <= n_pairs + max(3, n_pairs // 3):
                 continue
-            r2 = wahba_svd(self.obs.vec[w_obs], self.db.stars.vec[w_cat])
-            near, near_off = self._near(r2)
-            ok, m_obs, m_cat, p_single, r2 = refine(
-                self.obs.vec, self.obs.xy, self.db.stars.vec, w_obs[:0], w_cat[:0], r2, 1.0, near, near_off, k,
-                self.match_radius_px, max_refits=4)
+            ok, m_obs, m_cat, p_single, r2 = self.rematch(wahba_svd(self.obs.vec[w_obs], self.db.stars.vec[w_cat]))
             if not ok or len(m_obs) <= n_pairs:
                 continue  # no better basin there: the wide pairs were mostly chance (a dense field)
             moved = (m_obs, m_cat, p_single, r2)
             r, n_pairs = r2, len(m_obs)
         return moved
+
+    def rematch(self, r: FloatArray) -> tuple[bool, IntArray, IntArray, float, FloatArray]:
+        """Every pair an attitude ``r`` (ICRS -> body) implies at the match radius, refitted while
+        the pairs grow: ``(ok, obs rows, catalogue rows, p, r)`` (see :func:`match.refine`)."""
+        near, near_off = self._near(r)
+        return refine(self.obs.vec, self.obs.xy, self.db.stars.vec, np.zeros(0, np.int64), np.zeros(0, np.int64),
+                      r, 1.0, near, near_off, self.obs.kernel_arrays, self.match_radius_px, max_refits=4)
 
     def _drop_unverifiable(self, m_obs: IntArray, m_cat: IntArray, r: FloatArray, hyp_obs: IntArray
                            ) -> tuple[IntArray, IntArray, FloatArray]:

@@ -44,6 +44,11 @@ Where the paper is vague or weak we chose:
 - ``r`` = 0.5 deg (centroid noise and blends make shorter sides uninformative) and ``R`` = the
   camera's field side;
 - a single-camera frame uses the distance triangle alone;
+- ``robust`` ranks a master's candidates by their votes beyond chance (each catalogue star's
+  expected chance votes from the star density around it, :meth:`MultiFovMatcher.chance_votes`),
+  not by the votes alone: in dense sky every star collects many chance votes, which crowded
+  the true master out of the candidates with coarse pixels (one camera, 0.5 px, 100 frames:
+  seed 004 15 -> 90 % right, seed 003 67 -> 97 %, seed 000 79 -> 92 %, 0 wrong);
 - a frame of 3-8 stars the masters do not solve (``robust``: e.g. (2, 2) or (1, 3) stars per
   camera, no camera with three for the vote) is proven by one triangle across the cameras and
   every other star (:mod:`.rig_proof`).
@@ -81,6 +86,8 @@ MAX_CANDIDATES = 64
 """A master keeps its this-many most-voted catalogue stars, and every star tied with the last."""
 MAX_TIES = 4096
 """... but never more than this (a camera with three stars gives thousands of two-vote ties)."""
+RING_DEG = (0.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+"""Rings (deg) around a star whose star densities set its chance votes (clipped to the pair table's reach)."""
 MAX_PARTNERS = 20
 """A master votes with at most this many of the brightest other stars of its camera."""
 
@@ -210,6 +217,7 @@ class MultiFovMatcher:
         self.vec = db.stars.vec
         self.n_stars = len(db.stars)
         self.lookup = PairLookup(self.pairs, self.angles, self.max_angle)
+        self._rings: tuple[FloatArray, FloatArray] | None = None
 
     # ---- look-ups --------------------------------------------------------------------------
     def ranges(self, lo: np.ndarray, hi: np.ndarray) -> tuple[IntArray, IntArray]:
@@ -239,9 +247,38 @@ class MultiFovMatcher:
             return np.zeros(0, np.int64)
         rows, _ = self._rows(d - tol, d + tol)
         votes = np.bincount(np.asarray(self.pairs[rows]).ravel(), minlength=self.n_stars)
+        if self.mode == "robust":  # the votes beyond each star's chance (see chance_votes)
+            chance = self.chance_votes(d, tol)
+            voted = np.flatnonzero(votes >= 2)
+            z = (votes[voted] - chance[voted]) / np.sqrt(chance[voted] + 1.0)
+            return voted[np.argsort(-z, kind="stable")[:MAX_CANDIDATES]]
         order = np.argsort(-votes, kind="stable")
         floor = max(2, int(votes[order[min(MAX_CANDIDATES, len(order)) - 1]]))
         return order[: min(int((votes >= floor).sum()), MAX_TIES)]
+
+    def chance_votes(self, d: FloatArray, tol: float) -> FloatArray:
+        """Expected chance votes of every catalogue star for partners at angles ``d`` (rad,
+        +- ``tol``): a partner at ``d`` collects the stars of an annulus ``4 pi sin(d) tol`` in
+        area, at the density of the star's own neighbours in the ring of ``RING_DEG`` that
+        holds ``d``.
+
+        The paper ranks a master's candidates by their votes alone. With coarse pixels every
+        catalogue star collects chance votes, far more in dense sky than the average: on seed
+        004 (70 "/px) the 64th-best star had 55-77 votes and the true master 36-90, among the
+        candidates in 13 of 160 tries. Ranked by the votes beyond chance, ``(votes - chance) /
+        sqrt(chance + 1)`` (``robust`` mode), a star of dense sky no longer crowds out the
+        master (``paper`` mode keeps the paper's ranking)."""
+        if self._rings is None:  # each star's neighbours per ring (the pair rows are sorted by angle)
+            edges = np.radians(np.minimum(np.asarray(RING_DEG), math.degrees(self.max_angle)))
+            ends = np.searchsorted(self.angles, edges, side="right")
+            within = np.stack([np.bincount(np.asarray(self.pairs[:e]).ravel(), minlength=self.n_stars)
+                               for e in ends])  # (rings + 1, n_stars), cumulative
+            area = np.maximum(np.cos(edges[:-1]) - np.cos(edges[1:]), 1e-12)  # / (2 pi sr)
+            self._rings = (edges, np.diff(within, axis=0) / area[:, None])
+        edges, density = self._rings
+        ring = np.clip(np.searchsorted(edges, d, side="right") - 1, 0, len(density) - 1)
+        weight = np.bincount(ring, weights=2.0 * np.sin(d) * tol, minlength=len(density))
+        return weight @ density
 
     def _edges(self, d: float, tol: float, firsts: IntArray) -> IntArray:
         """Directed catalogue pairs ``(a, b)`` with angle ``d +- tol`` and ``a`` in ``firsts``,

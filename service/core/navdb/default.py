@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import DatabaseMissingError
@@ -98,4 +101,20 @@ def ensure_default_database(
         why = "no default database" if old is None else f"the default database (schema {old}) is outdated"
         raise DatabaseMissingError(f"{why} at {path}; any `skyfix` command without a database argument "
                                    "(e.g. `skyfix db info`) rebuilds it")
-    return build_database_set(path, DEFAULT_MEMBERS if members is None else members, progress=progress)
+    with _build_lock(path):  # two processes starting at once (server workers, test workers): one builds
+        if (path / MANIFEST).is_file() and _older_schema(path) is None:
+            return path  # built by the process that held the lock
+        return build_database_set(path, DEFAULT_MEMBERS if members is None else members, progress=progress)
+
+
+@contextmanager
+def _build_lock(path: Path) -> Iterator[None]:
+    """An exclusive lock on ``path``'s build (a lock file beside it, held until the build is
+    published): a second builder would delete the first one's staging directory."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path.parent / f".{path.name}.lock", "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)

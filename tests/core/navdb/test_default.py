@@ -29,3 +29,23 @@ def test_maxangle_on_the_default_database_identifies_seed000s_frames(default_set
         solved += s.solved
         wrong += s.solved and not s.correct
     assert wrong == 0 and solved >= 0.97 * len(frames)
+
+
+def test_two_processes_building_the_default_database_at_once_both_get_it(tmp_path) -> None:
+    """Server workers or test workers starting together on a fresh machine: one builds, the
+    other waits for it (a second builder would delete the first one's staging directory)."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("from service.core.navdb import BuildConfig, ensure_default_database, open_database; "
+            "m = {'tiny': BuildConfig(fov_min_deg=10, fov_max_deg=15, mag_limit=4.0, methods=('pyramid',))}; "
+            "print(sorted(open_database(ensure_default_database(members=m)).members))")
+    env = {**os.environ, "SKYFIX_DB_DIR": str(tmp_path)}
+    procs = [subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for _ in range(2)]
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [err[-2000:] for _, err in outs]
+    assert [out.strip() for out, _ in outs] == ["['tiny']", "['tiny']"]
+    published = [p for p in tmp_path.iterdir() if p.name.startswith(".default.") and p.is_dir()]
+    assert len(published) == 1 and not list(tmp_path.glob(".default.tmp-*"))  # built once, nothing left half-done

@@ -86,6 +86,14 @@ def kernel_cache_dirs(package_dir: Path, cache_dir: str = "") -> list[Path]:
     return [Path(cache_dir) / f"{d.name}_{hashlib.sha1(str(d).encode()).hexdigest()}" for d in dirs]
 
 
+def stamp_path(package_dir: Path, cache_dir: str = "") -> Path:
+    """The file that names the sources the package's cached kernels were compiled from: in
+    ``__pycache__``, or under ``cache_dir`` (``NUMBA_CACHE_DIR``) named after the package's path."""
+    if not cache_dir:
+        return package_dir / "__pycache__" / STAMP_NAME
+    return Path(cache_dir) / f"{STAMP_NAME}-{hashlib.sha1(str(package_dir).encode()).hexdigest()[:12]}"
+
+
 def drop_stale_kernels(package_dir: Path | None = None, cache_dir: str | None = None) -> int:
     """Delete the package's cached kernels if its sources changed since they were cached (see
     the module's docstring); returns how many files were deleted. A read-only cache (an image
@@ -94,8 +102,7 @@ def drop_stale_kernels(package_dir: Path | None = None, cache_dir: str | None = 
     if cache_dir is None:
         cache_dir = os.environ.get("NUMBA_CACHE_DIR", "")
     dirs = kernel_cache_dirs(here, cache_dir)
-    stamp = (Path(cache_dir) / f"{STAMP_NAME}-{hashlib.sha1(str(here).encode()).hexdigest()[:12]}" if cache_dir
-             else here / "__pycache__" / STAMP_NAME)
+    stamp = stamp_path(here, cache_dir)
     now = sources_fingerprint(here)
     try:
         if stamp.read_text() == now:

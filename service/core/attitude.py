@@ -197,6 +197,17 @@ def pooled_sigma(residuals_arcsec: np.ndarray, sd: np.ndarray, prior_sigma_rad: 
     return sd * (pooled / from_residuals)
 
 
+def wahba_batch(obs: FloatArray, ref: FloatArray) -> FloatArray:
+    """Rotations ``(K, 3, 3)`` best mapping each ``ref[k]`` ``(n, 3)`` onto ``obs`` ``(n, 3)``, or
+    onto ``obs[k]`` when ``obs`` is ``(K, n, 3)`` (SVD solution of Wahba's problem, vectorised
+    over K; ``n >= 2``)."""
+    b = np.einsum("kni,knj->kij", np.broadcast_to(obs, ref.shape), ref)
+    u, _, vt = np.linalg.svd(b)
+    det = np.sign(np.linalg.det(u) * np.linalg.det(vt))
+    u[:, :, 2] *= det[:, None]
+    return u @ vt
+
+
 def wahba_svd(obs: FloatArray, ref: FloatArray, weights: FloatArray | None = None) -> FloatArray:
     """Rotation ``R`` (3, 3) minimising ``sum w_i |obs_i - R ref_i|^2`` (Markley's SVD method).
 

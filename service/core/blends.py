@@ -81,12 +81,11 @@ def dominant_kernel(obs_xy: np.ndarray, free_obs: np.ndarray, pred_xy: np.ndarra
             continue
         crowded = False
         for j in range(len(pred_xy)):
-            if j != best and d[j] <= wide and pred_mag[j] - pred_mag[best] < min_delta_mag:
-                crowded = True
-                break
-            # a star the detector splits from the bright one, near the blob too: it may be its image
-            if j != best and d[j] <= wide and math.hypot(pred_xy[j, 0] - pred_xy[best, 0],
-                                                         pred_xy[j, 1] - pred_xy[best, 1]) > RESOLVED_PX:
+            if j == best or d[j] > wide:
+                continue
+            # not much fainter, or one the detector splits from the bright one (the blob may be its image)
+            if pred_mag[j] - pred_mag[best] < min_delta_mag or \
+                    math.hypot(pred_xy[j, 0] - pred_xy[best, 0], pred_xy[j, 1] - pred_xy[best, 1]) > RESOLVED_PX:
                 crowded = True
                 break
         if crowded:

@@ -30,8 +30,8 @@ import numpy as np
 from numba import njit
 
 from .answer import FIELD_MARGIN_DEG, answer_kernel, star_mags
-from .hidden import hidden_neighbours
 from .attitude import PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
+from .hidden import hidden_neighbours
 from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
 from .methods.quad_kernel import STATUS_FOUND, quad_search, recheck_pairs

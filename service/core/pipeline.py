@@ -23,7 +23,6 @@ from .camera import Camera, brightest_first
 from .errors import InvalidInputError, UnknownMethodError
 from .first_pass import deeper_arrays, first_pass
 from .hidden import hidden_kernel, hidden_neighbours
-from .trimmed import trimmed_basin
 from .match import CROWD
 from .methods import SolveContext, get_matcher, get_method, resolve
 from .methods.quad import QUERY_STARS
@@ -32,6 +31,7 @@ from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted, 
 from .refusal import no_solution, refusal
 from .residuals import distant_pairs
 from .solution import answer, solution_of
+from .trimmed import trimmed_basin
 from .types import Centroids, Solution, SolveStatus
 from .verify import Observation, Verified, Verifier, star_tree
 

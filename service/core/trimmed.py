@@ -25,7 +25,7 @@ from itertools import combinations
 
 import numpy as np
 
-from .attitude import wahba_svd
+from .attitude import wahba_batch, wahba_svd
 from .navdb.reader import NavDatabase
 from .verify import Verified, Verifier
 
@@ -41,20 +41,6 @@ MAX_TRIPLES = 600
 """Triples of pairs fitted at most (all of them up to 16 pairs; a seeded sample beyond)."""
 
 
-def fit_noise_px(obs_vec: np.ndarray, star_vec: np.ndarray, r: np.ndarray, pixel_scale_rad: float) -> np.ndarray:
-    """Distances (px) of observed body vectors ``obs_vec`` ``(n, 3)`` from their catalogue stars
-    ``star_vec`` ``(n, 3)`` rotated by ``r`` (ICRS -> body)."""
-    return np.linalg.norm(star_vec @ r.T - obs_vec, axis=1) / pixel_scale_rad
-
-
-def wahba_triples(obs: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """Rotations ``(K, 3, 3)`` best mapping each ``ref[k]`` ``(m, 3)`` onto ``obs[k]`` ``(m, 3)``
-    (SVD solution of Wahba's problem, vectorised over K)."""
-    u, _, vt = np.linalg.svd(np.einsum("kni,knj->kij", obs, ref))
-    u[:, :, 2] *= np.sign(np.linalg.det(u) * np.linalg.det(vt))[:, None]
-    return u @ vt
-
-
 def trimmed_basin(obs, db: NavDatabase, v: Verified, radius_px: float, sigma_px: float) -> Verified | None:
     """``v`` moved to the basin of its largest consistent cluster of pairs, or None when it stays
     (see the module's docstring). ``obs`` is the frame's :class:`~service.core.verify.Observation`,
@@ -65,12 +51,12 @@ def trimmed_basin(obs, db: NavDatabase, v: Verified, radius_px: float, sigma_px:
     sigma = max(float(sigma_px), MIN_SIGMA_PX)
     o = np.asarray(obs.vec[v.obs], np.float64)
     c = np.asarray(db.stars.vec[v.cat], np.float64)
-    d = fit_noise_px(o, c, v.matrix, obs.pixel_scale_rad)
+    d = np.linalg.norm(c @ v.matrix.T - o, axis=1) / obs.pixel_scale_rad  # px
     if math.sqrt(float(np.median(d * d)) / math.log(4.0)) <= SUSPECT_SIGMA * sigma:
         return None
     triples = np.array(list(combinations(range(n), 3)), np.int64) if math.comb(n, 3) <= MAX_TRIPLES else \
         np.sort(np.random.default_rng(n).random((MAX_TRIPLES, n)).argsort(axis=1)[:, :3], axis=1)
-    att = wahba_triples(o[triples], c[triples])  # (K, 3, 3)
+    att = wahba_batch(o[triples], c[triples])  # (K, 3, 3)
     err = np.linalg.norm(np.einsum("kij,nj->kni", att, c) - o[None], axis=2) / obs.pixel_scale_rad
     inliers = err <= INLIER_SIGMA * sigma
     best = inliers[int(np.argmax(inliers.sum(axis=1)))]

@@ -5,7 +5,6 @@ elsewhere."""
 
 from __future__ import annotations
 
-import hashlib
 import os
 import shutil
 import subprocess
@@ -76,10 +75,9 @@ def _prefill(cache: Path) -> int:
         shutil.copy2(index, dest / index.name)
         n += 1
     core = (ROOT / "service" / "core").resolve()
-    stamp = core / "__pycache__" / _numba_cache.STAMP_NAME
+    stamp = _numba_cache.stamp_path(core)
     if stamp.is_file() and stamp.read_text() == _numba_cache.sources_fingerprint(core):
-        name = f"{_numba_cache.STAMP_NAME}-{hashlib.sha1(str(core).encode()).hexdigest()[:12]}"
-        shutil.copy2(stamp, cache / name)
+        shutil.copy2(stamp, _numba_cache.stamp_path(core, str(cache)))
     return n
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..attitude import wahba_batch
 from ..types import FloatArray, IntArray
 from ..verify import Verified, star_tree
 from .base import SolveContext
@@ -21,16 +22,6 @@ MAX_CHECKS = 8
 """At most this many screened candidates go on to full verification."""
 SCREEN_STARS = 8
 """Candidates are screened on this many stars (the nearest to the hypothesis)."""
-
-
-def wahba_batch(obs: FloatArray, ref: FloatArray) -> FloatArray:
-    """Rotations ``(K, 3, 3)`` best mapping each ``ref[k]`` ``(n, 3)`` onto ``obs`` ``(n, 3)``
-    (SVD solution of Wahba's problem, vectorised over K; ``n >= 2``)."""
-    b = np.einsum("ni,knj->kij", obs, ref)
-    u, _, vt = np.linalg.svd(b)
-    det = np.sign(np.linalg.det(u) * np.linalg.det(vt))
-    u[:, :, 2] *= det[:, None]
-    return u @ vt
 
 
 def screen_and_grow(ctx: SolveContext, obs_idx: IntArray, cands: IntArray, others: IntArray, *,

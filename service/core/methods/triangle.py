@@ -33,8 +33,8 @@ from __future__ import annotations
 
 import functools
 import math
-from itertools import combinations
 from collections.abc import Callable
+from itertools import combinations
 from typing import Any
 
 import numpy as np

@@ -117,11 +117,13 @@ def build_database(out: str | os.PathLike[str], config: BuildConfig, *, progress
 
 
 def build_database_set(
-    out: str | os.PathLike[str], members: dict[str, BuildConfig], *, progress: Progress = _noop
+    out: str | os.PathLike[str], members: dict[str, BuildConfig], *, progress: Progress = _noop,
+    manifest_extra: dict[str, Any] | None = None,
 ) -> Path:
     """Build a *set* of databases at ``out``: one member per field-of-view range (e.g. a deep
     narrow-field member and a bright wide-field one). ``open_database`` returns a
     ``NavDatabaseSet`` that picks the member for each camera. Atomic like ``build_database``.
+    ``manifest_extra`` adds fields to the set's manifest (the default set's revision).
     """
     out = Path(out)
     if not members or not all(n.isidentifier() for n in members):
@@ -140,7 +142,7 @@ def build_database_set(
                              "mag_limit": m["mag_limit"], "n_stars": m["n_stars"]}
         _write_json(tmp / MANIFEST, {"format": SET_FORMAT_NAME, "schema_version": SCHEMA_VERSION,
                                      "built_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-                                     "members": listing})
+                                     "members": listing, **(manifest_extra or {})})
     progress("done", 1.0)
     return out
 

@@ -26,6 +26,7 @@ from service.core.navdb import (
     open_database,
 )
 from service.core.navdb.format import SCHEMA_VERSION
+from service.core.navdb.default import DEFAULT_REVISION
 from service.core.pipeline import SolveOptions
 from service.core.sim import SimConfig, simulate_frames
 from tests.conftest import SEED000_CAMERA, seed000_config
@@ -140,3 +141,26 @@ def test_default_database_of_an_older_schema_is_rebuilt(tmp_path: Path,
     assert ensure_default_database(members=small) == path and os.readlink(path) == second
     with pytest.raises(DatabaseCorruptError, match="schema version"):
         open_database(path)
+
+
+def test_default_database_of_an_older_revision_is_rebuilt(tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """A default set built before ``DEFAULT_REVISION`` (no ``default_revision``: revision 1) is
+    rebuilt on first use; a database a user built at the same schema is not touched."""
+    monkeypatch.setenv("SKYFIX_DB_DIR", str(tmp_path))
+    small = {"only": BuildConfig(fov_max_deg=10.0, fov_min_deg=8.0, mag_limit=4.5, epoch=2026.0,
+                                 methods=("maxangle",))}
+    path = ensure_default_database(members=small)
+    first = os.readlink(path)
+    mpath = path.resolve() / "manifest.json"
+    manifest = json.loads(mpath.read_text())
+    assert manifest["default_revision"] == DEFAULT_REVISION
+    del manifest["default_revision"]  # as the previous skyfix wrote it
+    mpath.write_text(json.dumps(manifest))
+    assert not default_database_ready()
+    with pytest.raises(DatabaseMissingError, match="revision 1"):
+        ensure_default_database(build=False, members=small)
+    assert ensure_default_database(members=small) == path and os.readlink(path) != first
+    db = open_database(path, verify_hashes=True)
+    assert db.manifest["default_revision"] == DEFAULT_REVISION
+    assert db.members["only"].method_params("maxangle")["layout"] == "cells"

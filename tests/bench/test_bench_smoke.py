@@ -131,3 +131,15 @@ def test_profile_stages_smoke(default_set_db, capsys: pytest.CaptureFixture[str]
     profile_stages.main(["--camera", "seed003", "--repeat", "20"])
     out = capsys.readouterr().out
     assert "| compiled first pass |" in out and "| whole solve |" in out
+
+
+def test_bench_maxangle_layout_smoke(maxangle_db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from bench import bench_maxangle_layout
+
+    bench_maxangle_layout.main(["--db", str(maxangle_db), "--frames", "3", "--passes", "1"])
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| random") or
+            line.startswith("| simulated")]
+    assert len(rows) == 2
+    for row in rows:  # both layouts return the records (a tolerance's edge aside)
+        both, one_only = (int(x) for x in row.rstrip(" |").split("|")[-1].split("/"))
+        assert both > 0 and one_only <= both // 1000

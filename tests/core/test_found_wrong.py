@@ -65,3 +65,23 @@ def test_found_wrong_answers_name_no_false_star(case, default_set_db) -> None:
     s = score(sol, frame.quaternion, frame.hip.tolist(), blends=frame.blends)
     assert s.correct and s.wrong_stars == 0
     assert len(sol.stars) >= 8  # the real stars stay named
+
+
+KNOWN_WRONG = [
+    # session 10, `python -m bench.bench_wrong --frames 20000` (a different sample of the grid than
+    # the 100,000-frame sweep, which finds none): the same 2 wrong answers with session 9's code
+    # (git e654bf1) and this session's. Each is `quad`'s answer with the right attitude (15-16"
+    # off) and one false star named after a catalogue star just past the camera's limit (6.69 Mv
+    # for a 6.5-Mv camera, 6.28 for 6.0, with 0.3 mag of magnitude noise), observed among the
+    # frame's faintest (flux rank 15 of 19, 20 of 23) and inside the 2-px match radius: what a real
+    # star at the limit would look like. No check built so far separates them; kept here so that
+    # one that does shows (xfail is strict).
+    ("seed001", 2.0, 5, 0.3, 11583023456393873584, 166, 37),
+    ("seed003", 2.0, 2, 0.3, 10215180794168566637, 166, 82),
+]
+
+
+@pytest.mark.xfail(reason="a false star at the camera's limit, named as the catalogue star there (session 10)")
+@pytest.mark.parametrize("case", KNOWN_WRONG, ids=[f"{c[0]}-{c[1]}px-{c[2]}false-{c[6]}" for c in KNOWN_WRONG])
+def test_known_wrong_answers_at_the_limit(case, default_set_db) -> None:
+    test_found_wrong_answers_name_no_false_star(case, default_set_db)

@@ -29,6 +29,7 @@ from service.core.geometry import pairwise_angles  # noqa: E402
 from service.core.methods import get_matcher  # noqa: E402
 from service.core.methods.maxangle import MAX_CANDIDATES, MaxAngleMatcher  # noqa: E402
 from service.core.methods.maxangle_index import (  # noqa: E402
+    N_BLOCKS,
     N_CELLS,
     THETA_LO,
     THETA_SPAN,
@@ -50,7 +51,7 @@ def other_layout(m: MaxAngleMatcher) -> SimpleNamespace:
         key = np.asarray(m.key)
         b = np.asarray(m.b, np.float64)
         theta = THETA_LO + (key - np.floor(key)) * THETA_SPAN
-        n_blocks = 1024
+        n_blocks = N_BLOCKS
         new_key = paper_key(theta, b, n_blocks, m.b_scale)
         order = np.argsort(new_key, kind="stable")
         return SimpleNamespace(layout="paper", key=new_key[order], ids=np.ascontiguousarray(m.ids[order]),

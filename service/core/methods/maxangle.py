@@ -41,6 +41,7 @@ from ._pairs import build_pair_table, pattern_order
 from .base import Progress, SolveContext
 from .maxangle_index import (
     LAYOUTS,
+    N_BLOCKS,
     N_CELLS,
     bucket_starts,
     cell_key,
@@ -119,7 +120,7 @@ class MaxAngle:
         map_large_allocations()  # freed chunks go back to the system, not to glibc's heap
         d_max_deg = float(params.get("d_max_deg", config.fov_min_deg))
         xi_deg = float(params.get("xi_deg", 0.05))
-        n_blocks = int(params.get("n_blocks", 1024))
+        n_blocks = int(params.get("n_blocks", N_BLOCKS))
         layout = str(params.get("layout", "cells"))
         n_cells = int(params.get("n_cells", N_CELLS))
         if layout not in LAYOUTS:
@@ -188,7 +189,7 @@ class MaxAngle:
         tables = {name: _concat_consuming(parts[name], empty[name]) for name in names}
         del pairs, angles, p, ang, keys, key_order, keys_sorted, ang_by_key
         # key = bucket (cell or block) + a fraction below 1: sorted in place, bucket by bucket,
-        # with 5 bytes a triangle beside the tables (np.argsort and copies took 16)
+        # with 9 bytes a triangle beside the tables (np.argsort and copies took 16)
         sort_by_bucket_key(tables["key"], [tables[name] for name in names[1:]],
                            n_cells * n_cells if cells else n_blocks)
         key = tables["key"]

@@ -15,7 +15,8 @@ handedness. The layouts differ only in the order the records are stored in:
     Sorted by cell of ``(b, c)`` (``n_cells`` x ``n_cells`` cells over ``[0, b_scale)``), then
     by ``theta`` inside each cell (``key = cell + (theta - 60) / 120``). Columns ``key, ids, b,
     c``. A query reads the ``theta +- tol`` slice of the few cells covering ``b +- eps``,
-    ``c +- eps``: the same records 3-8x faster (``bench/...`` numbers in docs/performance.md).
+    ``c +- eps``: the same records 3-8x faster (``python -m bench.bench_maxangle_layout``;
+    docs/performance.md, session 10).
 
 Databases built before the ``layout`` parameter existed hold the ``paper`` layout and are read
 as such.
@@ -33,6 +34,8 @@ from ..screen import triple_product
 THETA_LO = math.pi / 3
 THETA_SPAN = 2 * math.pi / 3
 LAYOUTS = ("cells", "paper")
+N_BLOCKS = 1024
+"""``paper`` layout: the paper's N, theta blocks over [60, 180) deg (its faster choice)."""
 N_CELLS = 256
 """Cells per side of the ``cells`` layout's ``(b, c)`` grid (65,536 cells, half of them empty as
 ``c <= b``): a cell is ``d_max / 256`` wide (0.05 deg for a 12.5-deg table), about a query's
@@ -62,9 +65,8 @@ def cell_key(theta: np.ndarray, b: np.ndarray, c: np.ndarray, n_cells: int, b_sc
 
 
 def bucket_starts(key: np.ndarray, n_buckets: int) -> np.ndarray:
-    """Where each integer bucket of the sorted ``key`` begins: ``(n_buckets + 1,)`` int64, built
-    once per opened table (``paper``: ``n_blocks * SUB_BUCKETS`` sub-buckets of ``b``, the key
-    scaled by ``SUB_BUCKETS``; ``cells``: one per cell)."""
+    """``cells`` layout: where each cell (integer part of the sorted ``key``) begins,
+    ``(n_buckets + 1,)`` int64, built once per opened table."""
     return np.searchsorted(key, np.arange(n_buckets + 1, dtype=np.float64)).astype(np.int64)
 
 

@@ -74,7 +74,7 @@ databases a user built are left as they are. 2: ``maxangle`` tables in the ``cel
 (:mod:`service.core.methods.maxangle_index`; the same records, read 3-8x faster)."""
 
 
-def _older_schema(path: Path) -> str | None:
+def _outdated(path: Path) -> str | None:
     """Why the default database at ``path`` is older than this skyfix builds (a readable
     manifest with a smaller integer ``schema_version``, or ``default_revision``), else None."""
     try:
@@ -93,21 +93,21 @@ def _older_schema(path: Path) -> str | None:
 def default_database_ready() -> bool:
     """True if the default database exists and is of the current schema (nothing to build)."""
     path = default_database_dir() / DEFAULT_NAME
-    return (path / MANIFEST).is_file() and _older_schema(path) is None
+    return (path / MANIFEST).is_file() and _outdated(path) is None
 
 
 def ensure_default_database(
     *, progress: Progress = _noop, build: bool = True, members: dict[str, BuildConfig] | None = None
 ) -> Path:
     """Path of the default database, building it first if it is missing or was built by an
-    older skyfix (an older schema version or ``DEFAULT_REVISION``: it is replaced atomically; it is a cache of the
-    bundled catalogue, so nothing is lost). ``members`` overrides ``DEFAULT_MEMBERS``.
+    older skyfix (an older schema version or ``DEFAULT_REVISION``: it is replaced atomically;
+    it is a cache of the bundled catalogue, so nothing is lost). ``members`` overrides ``DEFAULT_MEMBERS``.
 
     A manifest that is unreadable or of a *newer* schema is left alone: opening it names the
     problem. With ``build=False`` a missing or old database raises ``DatabaseMissingError``.
     """
     path = default_database_dir() / DEFAULT_NAME
-    old = _older_schema(path)
+    old = _outdated(path)
     if (path / MANIFEST).is_file() and old is None:
         return path
     if not build:
@@ -115,7 +115,7 @@ def ensure_default_database(
         raise DatabaseMissingError(f"{why} at {path}; any `skyfix` command without a database argument "
                                    "(e.g. `skyfix db info`) rebuilds it")
     with _build_lock(path):  # two processes starting at once (server workers, test workers): one builds
-        if (path / MANIFEST).is_file() and _older_schema(path) is None:
+        if (path / MANIFEST).is_file() and _outdated(path) is None:
             return path  # built by the process that held the lock
         return build_database_set(path, DEFAULT_MEMBERS if members is None else members, progress=progress,
                                   manifest_extra={"default_revision": DEFAULT_REVISION})

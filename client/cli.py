@@ -117,7 +117,7 @@ def replay(
 ) -> None:
     """Replay recorded frames against a skyfix server and score them against their truth."""
     out = Console()
-    err = Console(stderr=True)
+    err = Console(stderr=True, soft_wrap=True)  # one line per error, however long the path
     try:
         frames = list(read_recording(recording))
     except RecordingError as exc:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -12,8 +13,21 @@ from service.core.navdb import BuildConfig, NavDatabase, build_database, open_da
 
 ROOT = Path(__file__).resolve().parents[1]
 
+START_TIMEOUT_S = 300.0
+"""How long a test waits for a server to start, s. A first start on a fresh checkout compiles every
+kernel (~75 s on a 2-core VM; longer while the other test worker compiles too): a limit that
+fails a stuck start, not a speed check."""
+
 SEED000_CAMERA = Camera.from_focal(94.9489, 14.0, 1024, 1024)
 """Seed 000's camera: 1024x1024, f 94.9489 mm, 14 um pixels (8.6 deg across)."""
+
+
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """``-n auto`` (the default, pyproject.toml): one test worker a core, at most 4. Each worker
+    builds the session's databases for itself, so more would cost memory and build time for
+    little gain; a test file runs whole on one worker (``--dist loadfile``)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(4, cores))
 
 
 def seed000_config(methods: tuple[str, ...] = ("pyramid", "maxangle")) -> BuildConfig:

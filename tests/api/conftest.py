@@ -28,6 +28,8 @@ from service.core.camera import Camera
 from service.core.navdb import BuildConfig, build_database
 from service.core.sim import SimConfig, SimFrame, simulate_frames
 
+from ..conftest import START_TIMEOUT_S
+
 ROOT = Path(__file__).resolve().parents[2]
 REAL = ROOT.parent / "shared" / "data" / "real"
 
@@ -76,7 +78,7 @@ def start_server(settings: Settings) -> LiveServer:
 
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + START_TIMEOUT_S
     while not server.started:
         if not thread.is_alive() or time.monotonic() > deadline:
             server.should_exit = True
@@ -112,7 +114,7 @@ def stop_serve(proc: subprocess.Popen[bytes]) -> None:
         proc.communicate()
 
 
-def wait_healthy(url: str, proc: subprocess.Popen[bytes], timeout_s: float = 60) -> None:
+def wait_healthy(url: str, proc: subprocess.Popen[bytes], timeout_s: float = START_TIMEOUT_S) -> None:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if proc.poll() is not None:

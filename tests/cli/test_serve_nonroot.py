@@ -107,7 +107,7 @@ def test_serve_as_nobody_becomes_healthy(scratch: Path) -> None:
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True, cwd="/",
         env=_env({"NUMBA_CACHE_DIR": str(cache), "SKYFIX_DB_DIR": str(scratch / "dbdir")}))
     try:
-        wait_healthy(f"http://127.0.0.1:{port}", proc, timeout_s=240)
+        wait_healthy(f"http://127.0.0.1:{port}", proc)
         health = httpx.get(f"http://127.0.0.1:{port}/v1/health", timeout=5).json()
         assert health["status"] == "ok", health
     finally:

@@ -24,9 +24,10 @@ import pytest
 
 from client.recording import RecordingWriter
 
+from ..conftest import START_TIMEOUT_S
+
 ROOT = Path(__file__).resolve().parents[2]
 REAL = Path(os.environ.get("SKYFIX_REAL_DATA", ROOT.parent / "shared" / "data" / "real"))
-START_TIMEOUT_S = 60.0
 
 
 def free_port() -> int:

@@ -19,7 +19,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from ..conftest import CAMERA_SPEC, ROOT, free_port, stop_serve
+from ..conftest import CAMERA_SPEC, ROOT, START_TIMEOUT_S, free_port, stop_serve
 
 CAMERAS = json.dumps({"tetra3": CAMERA_SPEC, "bench": CAMERA_SPEC})  # bench: bench_soak's frames
 
@@ -40,7 +40,7 @@ class Served:
         """Pids of the supervisor's live worker processes."""
         return children(self.proc.pid)
 
-    def wait_workers(self, n: int, timeout_s: float = 60, exclude: set[int] | None = None) -> list[int]:
+    def wait_workers(self, n: int, timeout_s: float = START_TIMEOUT_S, exclude: set[int] | None = None) -> list[int]:
         """Wait until ``n`` workers (none in ``exclude``) answer ``/v1/health``; their pids."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
@@ -117,7 +117,7 @@ def serve(tmp: Path, db: Path, workers: int = 1, env: dict[str, str] | None = No
             start_new_session=True)
     served = Served(proc, f"http://127.0.0.1:{port}", log_path)
     try:
-        deadline = time.monotonic() + 90
+        deadline = time.monotonic() + START_TIMEOUT_S
         while len(served.workers()) < workers or not all_healthy(served.url, set(served.workers())):
             if proc.poll() is not None or time.monotonic() > deadline:
                 raise RuntimeError(f"skyfix serve did not start: {log_path.read_text()[-2000:]}")

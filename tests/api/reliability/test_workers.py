@@ -24,7 +24,7 @@ from client import Client, Retry
 from service.core.navdb import BuildConfig, build_database
 from service.core.sim import SimFrame
 
-from ..conftest import API_DB_CONFIG, angle_deg, real_stars, rows
+from ..conftest import API_DB_CONFIG, START_TIMEOUT_S, angle_deg, real_stars, rows
 from .conftest import Served, serve
 
 
@@ -176,7 +176,7 @@ def test_database_rebuilt_while_serving_workers_move_on_sighup(pair: Served, db_
     time.sleep(0.5)
     assert set(seen) == old  # the workers keep the database they opened (its old files stay mapped)
     os.kill(pair.proc.pid, signal.SIGHUP)
-    deadline = time.monotonic() + 90
+    deadline = time.monotonic() + START_TIMEOUT_S
     while not (len(seen) == 2 and all_new(pair, old)):
         assert time.monotonic() < deadline, (seen, statuses)
         time.sleep(0.2)

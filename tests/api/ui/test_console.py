@@ -40,7 +40,7 @@ def console(default_set_db: Any) -> Iterator[str]:
     proc = spawn_serve("--port", str(port), env={"SKYFIX_CAMERAS": cameras})
     url = f"http://127.0.0.1:{port}"
     try:
-        wait_healthy(url, proc, timeout_s=120)
+        wait_healthy(url, proc)
         yield url
     finally:
         stop_serve(proc)

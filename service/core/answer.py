@@ -77,8 +77,8 @@ def recheck(obs, db: NavDatabase, obs_idx: IntArray, cat_idx: IntArray, n_trials
     g = field_grid(db, radius_deg)
     near_chord = 2 * math.sin(math.radians(radius_deg) / 2)
     ok, m_obs, m_cat, r, prob = recheck_pairs(
-        obs.vec, obs.xy, star_vec64(db), np.ascontiguousarray(obs_idx, dtype=np.int64),
-        np.ascontiguousarray(cat_idx, dtype=np.int64), g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns,
+        obs.vec, obs.xy, star_vec64(db), np.array(obs_idx, dtype=np.int64),  # copies (writable): one signature
+        np.array(cat_idx, dtype=np.int64), g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns,
         near_chord, k.mounts, k.cams, k.dist, k.rows, k.row_off, float(radius_px), float(obs.pixel_scale_rad),
         int(n_trials))
     return bool(ok), m_obs, m_cat, r, float(prob)

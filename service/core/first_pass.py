@@ -213,6 +213,7 @@ _NO_RES = np.zeros(0)
 _SOLVED_SEARCH = (STATUS_FOUND,)
 """A solved first pass's ``search``: only its status is kept (the answer holds the rest)."""
 _NO_DEEPER = Deeper(np.zeros(0, np.int64), np.zeros((0, 3)))
+_NO_DEEPER.star_vec.flags.writeable = False  # as star_vec64's: one compiled signature, deeper member or not
 _NO_GRID = (1.0, 1, np.zeros(1, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int64), np.zeros(1, np.int64))
 
 
@@ -233,7 +234,7 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
     search = quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bin, edge_max, star_vec,
                          s_cell, s_side, s_keys, s_starts, s_stars, s_columns, g_cell, g_side, g_keys, g_starts,
                          g_stars, g_columns, near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale,
-                         max_false_prob, strong_false_prob, confirm_patterns, screen_stars, 0, max_probes,
+                         max_false_prob, strong_false_prob, confirm_patterns, screen_stars, np.int64(0), max_probes,
                          max_checks)
     m_obs, m_cat, r, prob, trials = search[3], search[4], search[5], search[6], search[7]
     if search[0] != STATUS_FOUND:

@@ -441,5 +441,7 @@ def star_vec64(db: NavDatabase) -> np.ndarray:
     database)."""
     cache = db.__dict__.setdefault("_cache", {})
     if "vec64" not in cache:
-        cache["vec64"] = np.ascontiguousarray(db.stars.vec, dtype=np.float64)
+        vec = np.ascontiguousarray(db.stars.vec, dtype=np.float64).view()  # a view: its flags are its own
+        vec.flags.writeable = False  # as the memory map's own: one compiled signature for both
+        cache["vec64"] = vec
     return cache["vec64"]

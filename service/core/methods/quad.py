@@ -25,7 +25,7 @@ import numpy as np
 from ..catalog import StarTable
 from ..errors import DatabaseCorruptError
 from ..navdb.reader import NavDatabase
-from ..verify import NEAR_MARGIN_DEG, Verified, Verifier, field_grid, sky_grid
+from ..verify import NEAR_MARGIN_DEG, Verified, Verifier, field_grid, sky_grid, star_vec64
 from .base import Progress, SolveContext
 from .quad_build import LAYOUT, build_quad_table
 from .quad_kernel import STATUS_FOUND, quad_search
@@ -72,7 +72,7 @@ class QuadMatcher:
         self.ratio_bin = float(p["ratio_bin"])
         self.edge_bin = float(p["edge_bin_rad"])
         self.edge_max = math.radians(float(p["fov_max_deg"]))
-        self.star_vec = np.ascontiguousarray(db.stars.vec, dtype=np.float64)
+        self.star_vec = star_vec64(db)
         s = sky_grid(db)
         self.screen = s.kernel_args()
 

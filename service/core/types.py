@@ -154,6 +154,15 @@ class MatchedStars(Sequence[StarMatch]):
         cols = [c.tolist() if isinstance(c, np.ndarray) else c for c in self._columns]
         return list(map(_star_dict, *cols))
 
+    def column(self, name: str) -> list[Any]:
+        """One field of :class:`StarMatch` for every star, as a list (from the columns when no
+        tuple was made yet: scoring reads three fields of every answer)."""
+        i = StarMatch._fields.index(name)
+        if self._rows is None:
+            col = self._columns[i]
+            return col.tolist() if isinstance(col, np.ndarray) else list(col)
+        return [s[i] for s in self._rows]
+
     @overload
     def __getitem__(self, i: int) -> StarMatch: ...
     @overload

@@ -45,3 +45,12 @@ def test_the_wire_format_is_the_same_before_and_after_the_tuples_are_made() -> N
     assert sol.to_dict()["stars"] == before == Solution(SolveStatus.SOLVED, "quad", stars=tuple(stars)).to_dict()["stars"]
     assert before[0] == {"centroid": 4, "camera": 0, "hip": 32349, "ra_deg": 101.28, "dec_deg": -16.71, "mag": -1.46,
                          "residual_arcsec": 0.5}
+
+
+def test_a_column_reads_the_same_before_and_after_the_tuples_are_made() -> None:
+    stars = MatchedStars(*_columns())
+    before = {name: stars.column(name) for name in StarMatch._fields}
+    assert before["hip"] == [32349, 30438, 24436] and isinstance(before["hip"][0], int)
+    assert before["camera"] == [0, 0, 0]
+    assert len(stars[:]) == 3  # makes the tuples
+    assert {name: stars.column(name) for name in StarMatch._fields} == before

@@ -20,6 +20,9 @@ BLOCK = 20_000
 PIPE_BLOCK = 64
 """Lines per block and worker from standard input, so that a live feed's answers come out
 after at most this many frames (one at a time with one worker)."""
+WRITE_EVERY = 256
+"""Answers gathered before a write to stdout (one write per answer costs more than a frame's
+formatting)."""
 
 
 def solve_frames(
@@ -34,21 +37,22 @@ def solve_frames(
     after the database is opened and warmed up), and no-solutions by reason."""
     import time
 
-    from ..core.batch import FrameError, solve_many
+    from ..core.batch import FrameError, SolvePool
     from ..core.navdb import open_database
     from ..core.pipeline import SolveOptions, warm_up
 
     database = open_database(resolve_db(db))
     warm_up(database)  # before the clock: frames/s below is of solving, not of starting
     options = SolveOptions(centroid_sigma_px=sigma)
+    n_workers = workers or _cores()
     stream = sys.stdin if str(frames) == "-" else open(frames)
+    pool = SolvePool(database, method=method, options=options, workers=n_workers, then=_answer, return_errors=True)
     times: list[float] = []
     n = solved = wrong = checked = 0
     reasons: Counter[str] = Counter()
-    n_workers = workers or _cores()
     size = BLOCK if stream is not sys.stdin else (1 if n_workers == 1 else PIPE_BLOCK * n_workers)
     t0 = time.perf_counter()
-    with stream:
+    with stream, pool:
         lineno = 0
         while True:
             block = list(islice(stream, size))
@@ -56,16 +60,16 @@ def solve_frames(
                 break
             numbered = [(lineno + i + 1, line) for i, line in enumerate(block) if line.strip()]
             lineno += len(block)
-            results = solve_many([line for _, line in numbered], database, method=method, options=options,
-                                 workers=n_workers, then=_answer, return_errors=True)
-            out = []
+            results = pool.imap([line for _, line in numbered])
+            out: list[str] = []
             for (num, _), res in zip(numbered, results, strict=True):
                 if isinstance(res, FrameError):
                     sys.stdout.write("".join(out))
+                    results.close()  # cancels the frames not yet started
                     err_console.print(f"[red]line {num}:[/red] {res.message}")
                     raise typer.Exit(2)
                 text, ok, reason, correct, ms = res
-                out.append(text + "\n")
+                out.append(text)
                 n += 1
                 solved += ok
                 times.append(ms)
@@ -74,6 +78,9 @@ def solve_frames(
                 if correct is not None:
                     checked += 1
                     wrong += not correct
+                if len(out) >= WRITE_EVERY:  # while the workers go on solving
+                    sys.stdout.write("".join(out))
+                    out.clear()
             sys.stdout.write("".join(out))
             sys.stdout.flush()
     wall = time.perf_counter() - t0
@@ -95,21 +102,9 @@ def _cores() -> int:
 def _answer(rec: dict[str, Any], sol: Any) -> tuple[str, bool, str | None, bool | None, float]:
     """In the worker: the frame's JSON answer, whether it solved, why not, whether it matches
     the recording's truth (None without truth) and its solve time, ms."""
-    from ..core.evaluate import score
+    from ..core.evaluate import correct_against_record
 
-    correct = None
-    truth = rec.get("truth") or {}
-    if sol.solved and truth and not rec.get("cameras"):  # one camera (most recordings)
-        blends = {int(k): v for k, v in truth["blends"].items()} if truth.get("blends") else None
-        correct = score(sol, truth.get("quaternion"), truth.get("hip"), blends=blends).correct
-    elif sol.solved and truth:
-        blends = {int(k): v for k, v in (truth.get("blends") or {}).items()}
-        # a rig's truth lists every camera's HIPs one camera after the other
-        sizes = [len(c.get("centroids", [])) for c in rec["cameras"]] if rec.get("cameras") else [0]
-        hips = truth.get("hip")
-        correct = all(score(sol, truth.get("quaternion"), None if hips is None else hips[o:],
-                            camera=c, blends={k - o: v for k, v in blends.items() if k >= o}).correct
-                      for c, o in enumerate(np.cumsum([0, *sizes[:-1]]).tolist()))
+    correct = correct_against_record(rec, sol)
     reason = None if sol.reason is None else sol.reason.value
-    text = orjson.dumps(sol.to_dict(rec.get("id"))).decode()
+    text = orjson.dumps(sol.to_dict(rec.get("id")), option=orjson.OPT_APPEND_NEWLINE).decode()
     return text, sol.solved, reason, correct, sol.timings_ms.get("total", 0.0)

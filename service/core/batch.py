@@ -6,13 +6,16 @@ This is the batch path of the engine, for ground processing of recordings (``sky
 
 from __future__ import annotations
 
+import gc
 import multiprocessing as mp
 import os
 import pickle
 import threading
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence, Sized
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass
+from itertools import islice
 from typing import Any
 
 import orjson
@@ -151,15 +154,130 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
         thread pool; the numba kernels release the GIL, but most of a frame's time is Python
         around them (docs/benchmarks.md, Batch), so threads gain little.
     """
-    if pool not in ("process", "thread"):
-        raise ValueError(f"pool must be 'process' or 'thread', not {pool!r}")
-    todo = list(frames)
-    if workers is None:
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    workers = max(1, min(workers, len(todo) or 1))
-    if not db.__dict__.get("_warm"):
-        warm_up(db)  # once, before any worker exists
+    return list(solve_iter(frames, db, method=method, options=options, workers=workers, then=then,
+                           return_errors=return_errors, pool=pool))
 
+
+def solve_iter(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, method: str = "auto",
+               options: SolveOptions = DEFAULT_OPTIONS, workers: int | None = None,
+               then: Callable[[Any, Solution], Any] | None = None, return_errors: bool = False,
+               pool: str = "process") -> Iterator[Any]:
+    """:func:`solve_many`, yielding each answer, in order, as soon as it and those before it are
+    ready: a caller that writes answers out does so while the workers go on solving. Same
+    parameters as :func:`solve_many`; the workers are started on the first ``next()`` and
+    stopped when the generator ends or is closed (a caller solving block after block keeps
+    one :class:`SolvePool` instead)."""
+    todo = list(frames)
+    with SolvePool(db, method=method, options=options, workers=min(workers or _cores(), len(todo) or 1),
+                   then=then, return_errors=return_errors, pool=pool) as solver:
+        yield from solver.imap(todo)
+
+
+def _cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+class SolvePool:
+    """Workers that solve frames, started once and fed block after block (``skyfix solve``).
+
+    Parameters are those of :func:`solve_many`. With ``pool="process"`` (and POSIX fork, from
+    a single-threaded process) the workers are forked here, after the database is warmed up,
+    so each starts with the compiled kernels and indexes and shares the memory-mapped
+    database's pages; their task (database, method, options, ``then``) is inherited through the
+    fork and only the frames and the answers are pickled. Otherwise threads; ``workers=1``
+    solves in the calling thread. Use as a context manager, or call :meth:`close`.
+    """
+
+    def __init__(self, db: NavDatabase | NavDatabaseSet, *, method: str = "auto",
+                 options: SolveOptions = DEFAULT_OPTIONS, workers: int | None = None,
+                 then: Callable[[Any, Solution], Any] | None = None, return_errors: bool = False,
+                 pool: str = "process") -> None:
+        global _TASK
+        if pool not in ("process", "thread"):
+            raise ValueError(f"pool must be 'process' or 'thread', not {pool!r}")
+        if not db.__dict__.get("_warm"):
+            warm_up(db)  # once, before any worker exists
+        self.workers = max(1, workers or _cores())
+        self._task = _make_task(db, method, options, then, return_errors)
+        self._procs: ProcessPoolExecutor | None = None
+        self._threads: ThreadPoolExecutor | None = None
+        if self.workers == 1:
+            return
+        # fork only a single-threaded process: a thread holding a lock at the fork would leave
+        # the lock held forever in the child
+        if pool == "process" and "fork" in mp.get_all_start_methods() and threading.active_count() == 1:
+            _TASK = self._task
+            gc.collect()
+            gc.freeze()  # the workers never collect what they inherit: no copy-on-write of its pages
+            try:
+                # an executor, not mp.Pool: a worker that dies (killed, out of memory) raises
+                # BrokenProcessPool in the caller instead of leaving it waiting forever
+                self._procs = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("fork"))
+                for f in [self._procs.submit(os.getpid) for _ in range(self.workers)]:
+                    f.result()  # every worker forked (with the task above) before it is reset
+            finally:
+                _TASK = None
+                gc.unfreeze()  # in this process only
+        else:
+            self._threads = ThreadPoolExecutor(max_workers=self.workers)
+
+    def imap(self, frames: Iterable[Item]) -> Iterator[Any]:
+        """Solve ``frames``, yielding the answers in order as they are ready. Frames go to the
+        workers in chunks, at most :data:`CHUNKS_IN_FLIGHT` per worker at a time, so an
+        iterable is read only as fast as it is solved. Closing the generator early cancels
+        the chunks not yet started."""
+        if self._procs is None and self._threads is None:
+            yield from map(self._task, frames)
+            return
+        size = CHUNK
+        if isinstance(frames, Sized):  # small chunks for a small block: every worker gets some
+            size = max(1, min(CHUNK, -(-len(frames) // (CHUNKS_PER_WORKER * self.workers))))
+        items = iter(frames)
+        pending: deque[Future[Any]] = deque()
+        try:
+            while True:
+                while len(pending) < CHUNKS_IN_FLIGHT * self.workers:
+                    chunk = list(islice(items, size))
+                    if not chunk:
+                        break
+                    pending.append(self._procs.submit(_run_chunk, chunk) if self._procs is not None
+                                   else self._threads.submit(_run_local, self._task, chunk))  # type: ignore[union-attr]
+                if not pending:
+                    return
+                answers = pending.popleft().result()
+                if isinstance(answers, _Raised):
+                    raise answers.error
+                yield from answers
+        finally:
+            for f in pending:
+                f.cancel()
+
+    def close(self) -> None:
+        """Stop the workers (waiting for the chunks they hold)."""
+        for ex in (self._procs, self._threads):
+            if ex is not None:
+                ex.shutdown(wait=True, cancel_futures=True)
+        self._procs = self._threads = None
+
+    def __enter__(self) -> SolvePool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+CHUNK = 128
+"""Frames a worker takes at a time (~15 ms of solving on the 12-deg camera): each chunk costs
+one round trip (~0.1 ms)."""
+CHUNKS_PER_WORKER = 16
+"""A block of known length is cut into at least this many chunks per worker, so that both
+workers stay busy to its end."""
+CHUNKS_IN_FLIGHT = 4
+"""Chunks queued per worker: enough that a worker never waits for the next."""
+
+
+def _make_task(db: NavDatabase | NavDatabaseSet, method: str, options: SolveOptions,
+               then: Callable[[Any, Solution], Any] | None, return_errors: bool) -> Callable[[Item], Any]:
     def task(item: Item) -> Any:
         try:
             rec = orjson.loads(item) if isinstance(item, (str, bytes)) else item
@@ -171,19 +289,12 @@ def solve_many(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
                 raise
             return FrameError(str(exc), getattr(exc, "field", None))
 
-    if workers == 1:
-        return [task(f) for f in todo]
-    # fork only a single-threaded process: a thread holding a lock at the fork would leave the
-    # lock held forever in the child
-    if pool == "process" and "fork" in mp.get_all_start_methods() and threading.active_count() == 1:
-        return _fork_map(task, todo, workers)
-    with ThreadPoolExecutor(max_workers=workers) as threads:
-        return list(threads.map(task, todo))
+    return task
 
 
-_JOB: tuple[Callable[[Any], Any], Sequence[Any]] | None = None
-"""The task and items of the running :func:`_fork_map`: forked workers inherit them, so only
-chunk bounds go to a worker and only results come back (nothing else is pickled)."""
+_TASK: Callable[[Item], Any] | None = None
+"""The task of the :class:`SolvePool` being started: its forked workers inherit it, so only
+frames go to a worker and only answers come back."""
 
 
 @dataclass(frozen=True)
@@ -193,11 +304,15 @@ class _Raised:
     error: BaseException
 
 
-def _run_chunk(bounds: tuple[int, int]) -> list[Any] | _Raised:
-    assert _JOB is not None
-    fn, items = _JOB
+def _run_local(task: Callable[[Item], Any], chunk: list[Item]) -> list[Any]:
+    return [task(item) for item in chunk]
+
+
+def _run_chunk(chunk: list[Item]) -> list[Any] | _Raised:
+    """In a forked worker: the inherited task on each item of ``chunk``."""
+    assert _TASK is not None, "a forked worker of a SolvePool"
     try:
-        return [fn(item) for item in items[bounds[0]:bounds[1]]]
+        return [_TASK(item) for item in chunk]
     except Exception as exc:  # noqa: BLE001 - re-raised in the caller
         try:
             pickle.loads(pickle.dumps(exc))
@@ -206,25 +321,4 @@ def _run_chunk(bounds: tuple[int, int]) -> list[Any] | _Raised:
         return _Raised(exc)
 
 
-def _fork_map(fn: Callable[[Any], Any], items: Sequence[Any], workers: int) -> list[Any]:
-    """``[fn(x) for x in items]`` on ``workers`` forked processes, in order. Chunks of about
-    1/8 of a worker's share balance slow frames against the cost of a round trip."""
-    global _JOB
-    size = max(16, -(-len(items) // (8 * workers)))
-    bounds = [(lo, min(lo + size, len(items))) for lo in range(0, len(items), size)]
-    _JOB = (fn, items)
-    try:
-        out: list[Any] = []
-        # an executor, not mp.Pool: a worker that dies (killed, out of memory) raises
-        # BrokenProcessPool here instead of leaving the caller waiting forever
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("fork")) as procs:
-            for chunk in procs.map(_run_chunk, bounds):
-                if isinstance(chunk, _Raised):
-                    raise chunk.error
-                out.extend(chunk)
-        return out
-    finally:
-        _JOB = None
-
-
-__all__ = ["Frame", "FrameError", "frame_from_record", "solve_frame", "solve_many"]
+__all__ = ["Frame", "FrameError", "SolvePool", "frame_from_record", "solve_frame", "solve_iter", "solve_many"]

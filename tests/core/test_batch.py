@@ -89,3 +89,45 @@ def test_solve_many_parses_lines_in_the_workers_and_returns_errors(seed000_db: N
     for workers in (1, 2):  # raised in the caller, also from a forked worker (was: a hang)
         with pytest.raises(InvalidInputError, match="camera"):
             solve_many(lines[:20], seed000_db, workers=workers)
+
+
+@pytest.mark.parametrize("pool", ["process", "thread"])
+def test_solve_pool_serves_block_after_block_and_reads_a_generator_lazily(seed000_db: NavDatabase,
+                                                                           pool: str) -> None:
+    """One SolvePool answers several blocks in order on the same workers (forked once), and
+    takes frames from a generator only as fast as it solves them."""
+    from service.core.batch import CHUNK, CHUNKS_IN_FLIGHT, SolvePool
+
+    frames = _frames(12, 21)
+    want = [solve_frame(f, seed000_db).status for f in frames]
+    with SolvePool(seed000_db, workers=2, pool=pool, then=lambda rec, sol: (rec.id, sol.status, os.getpid())) as sp:
+        first = list(sp.imap(frames))
+        second = list(sp.imap(frames[::-1]))
+        assert [r[:2] for r in first] == [(i, s) for i, s in enumerate(want)]
+        assert [r[:2] for r in second] == [(i, s) for i, s in enumerate(want)][::-1]
+        if pool == "process" and sp._procs is not None:
+            pids = {r[2] for r in first + second}
+            assert os.getpid() not in pids and len(pids) <= 2, "the same two forked workers"
+
+        taken = 0
+
+        def endless():  # a live feed: never ends
+            nonlocal taken
+            while True:
+                taken += 1
+                yield frames[taken % len(frames)]
+
+        answers = sp.imap(endless())
+        got = [next(answers) for _ in range(5)]
+        answers.close()  # cancels what is queued
+        assert len(got) == 5
+        assert taken <= (CHUNKS_IN_FLIGHT * 2 + 1) * CHUNK, "read ahead by at most the chunks in flight"
+
+
+def test_solve_pool_names_a_bad_pool_and_solves_in_process_on_one_worker(seed000_db: NavDatabase) -> None:
+    from service.core.batch import SolvePool
+
+    with pytest.raises(ValueError, match="pool"):
+        SolvePool(seed000_db, pool="gpu")
+    with SolvePool(seed000_db, workers=1, then=lambda rec, sol: os.getpid()) as sp:
+        assert set(sp.imap(_frames(3, 2))) == {os.getpid()}

@@ -108,8 +108,10 @@ def refine(obs_vec: FloatArray, obs_xy: FloatArray, star_vec: FloatArray, hyp_ob
     Returns ``(ok, obs_rows, star_rows, p, r)`` (see :func:`match_rig`), ``r`` fitted to the
     pairs returned.
     """
-    return _refine(obs_vec, obs_xy, star_vec, np.ascontiguousarray(hyp_obs, dtype=np.int64),
-                   np.ascontiguousarray(hyp_cat, dtype=np.int64), np.ascontiguousarray(r0, dtype=np.float64),
+    # the hypothesis as writable copies (a few rows): a read-only view (multifov's) would be a
+    # second compiled signature of the whole kernel
+    return _refine(obs_vec, obs_xy, star_vec, np.array(hyp_obs, dtype=np.int64), np.array(hyp_cat, dtype=np.int64),
+                   np.ascontiguousarray(r0, dtype=np.float64),
                    float(quick_tol), near, near_off, rig.mounts, rig.cams, rig.dist, rig.rows, rig.row_off,
                    float(radius_px), int(max_refits))
 

@@ -297,7 +297,7 @@ def verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g
                   g_columns, buf)
     near_off = np.array([0, len(near)], np.int64)
     ok, m_obs, m_cat, p_single, r = _refine(obs_vec, obs_xy, star_vec, o, lab, r, quick_tol, near, near_off,
-                                            mounts, cams, dist, rows, row_off, radius_px, 4)
+                                            mounts, cams, dist, rows, row_off, radius_px, np.int64(4))
     if not ok:
         return False, empty, empty, r, 1.0
     n_pairs = len(m_obs)
@@ -314,7 +314,7 @@ def verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g
                       g_columns, buf)
         near_off[1] = len(near)
         ok2, s_obs, s_cat, p2, r2 = _refine(obs_vec, obs_xy, star_vec, w_obs[:0], w_cat[:0], r2, 1.0, near,
-                                            near_off, mounts, cams, dist, rows, row_off, radius_px, 4)
+                                            near_off, mounts, cams, dist, rows, row_off, radius_px, np.int64(4))
         if not ok2 or len(s_obs) <= n_pairs:
             continue
         m_obs, m_cat, p_single, r = s_obs, s_cat, p2, r2

@@ -266,10 +266,32 @@ def _search_plan(db: NavDatabase | NavDatabaseSet, cameras: list[Camera], method
         members, deepest = [db], db
     fov = max(cam.fov_deg for cam in cameras)
     method_lists = [resolve(m, method, fov_deg=fov, sigma_px=sigma_px) for m in members]
+    if method == "auto":
+        method_lists = [_rig_methods(ms, rig=len(cameras) > 1) for ms in method_lists]
     if len(cache) >= PLAN_CACHE_SIZE:
         cache.clear()
     cache[key] = (_plan(members, method_lists), deepest)
     return cache[key]
+
+
+RIG_METHOD = "multifov"
+"""The method made for rigs (several cameras on one body): it identifies each camera's
+brightest star by votes within its own camera and joins the cameras through their known
+mountings, so it proves frames that no single camera could, e.g. (2, 2) or (1, 3) stars per
+camera (``python -m bench.bench_rig``)."""
+
+
+def _rig_methods(methods: list[str], *, rig: bool) -> list[str]:
+    """``auto``'s methods of one member for a rig frame or a one-camera frame: on a rig,
+    :data:`RIG_METHOD` right after the first (fast) method, so that it is the fallback that runs
+    when the first pass misses; on one camera it is left out (unless it is all the member holds):
+    the other methods prove what it can there, faster."""
+    if RIG_METHOD not in methods:
+        return methods
+    rest = [m for m in methods if m != RIG_METHOD]
+    if not rig:
+        return rest
+    return [rest[0], RIG_METHOD, *rest[1:]] if rest else [RIG_METHOD]
 
 
 def _plan(members: list[NavDatabase], method_lists: list[list[str]]) -> list[tuple[NavDatabase, list[str]]]:
@@ -617,6 +639,16 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
         for n in (len(frame), 4, 3):
             solve(Centroids(frame.xy[:n], frame.flux[:n]), camera, db)
         solve(Centroids(rng.uniform(0, 1023, (12, 2)), rng.uniform(1, 100, 12)), camera, db)
+    # rigs: the rig method's own kernels (its master votes, the cross-camera proof of a sparse
+    # frame) on a frame of a member's stars dealt out to two cameras of one pointing
+    for member in members:
+        if RIG_METHOD in member.methods:
+            camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
+            frame = _own_frames(member, camera, n_tries=1)[0]
+            ident = (1.0, 0.0, 0.0, 0.0)
+            for n in (len(frame), 4):
+                halves = [Centroids(frame.xy[k:n:2], frame.flux[k:n:2]) for k in (0, 1)]
+                solve_rig([(h, camera, ident) for h in halves], db)
 
 
 def _own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centroids]:

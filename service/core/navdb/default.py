@@ -34,6 +34,10 @@ DEFAULT_MEMBERS: dict[str, BuildConfig] = {
         fov_min_deg=9.0, fov_max_deg=32.0, mag_limit=6.5, double_star_sep_deg=0.02,
         density_cap=12, density_radius_deg=4.0, methods=("quad", "maxangle", "pyramid"),
     ),
+    "rig": BuildConfig(
+        fov_min_deg=7.0, fov_max_deg=13.0, mag_limit=6.5, double_star_sep_deg=0.02,
+        density_cap=12, density_radius_deg=4.0, methods=("multifov",),
+    ),
 }
 """The default database set: a deep (V <= 8, density-capped) member for cameras of 3.5-16.5 deg
 diagonal, a V <= 7 one for 3.5-9 deg, a bright one for 9-32 deg (the real test images, most star
@@ -50,7 +54,14 @@ extra match likely by chance); against V <= 7 it can, with the triangle method's
 unique-triangle proof. The set tries the shallowest fitting member first. Measured with
 ``python -m bench.bench_default_db --frames 300 --camera seed002``: the 4-deg camera's frames
 of 3 stars 0/37 -> 32/37, of 4 stars 1/44 -> 41/44 (a database built for the camera: 33/37,
-44/44); the other paper cameras unchanged. It adds 1.1 s to the build and 29 MB."""
+44/44); the other paper cameras unchanged. It adds 1.1 s to the build and 29 MB.
+
+``rig`` serves rigs only (several cameras on one body, ``solve_rig``): ``multifov`` for cameras of
+7 deg side to 13 deg diagonal at V <= 6.5 (the pair table and its index: ~1.5 s of the build and
+6 MB). ``auto`` runs it on a rig after the first pass, and never on one camera
+(``pipeline.RIG_METHOD``). Without it, seed 001's rig (GF-7's two 8.9-deg cameras, whose 12.6-deg
+diagonal only the deep ``narrow`` member serves) identified 93.3% of frames with 4 or more stars;
+with it 99.7%, 0 wrong (``python -m bench.bench_rig --frames 1000 --mag-limit 5.5 --noise 0.5``)."""
 
 
 def default_database_dir() -> Path:
@@ -67,11 +78,12 @@ def default_database_dir() -> Path:
     return Path(cache) / "skyfix" / "db"
 
 
-DEFAULT_REVISION = 2
+DEFAULT_REVISION = 3
 """The default set's contents, recorded in its manifest (``default_revision``): a default
 database of an older revision is rebuilt on first use, like one of an older schema, while
 databases a user built are left as they are. 2: ``maxangle`` tables in the ``cells`` layout
-(:mod:`service.core.methods.maxangle_index`; the same records, read 3-8x faster)."""
+(:mod:`service.core.methods.maxangle_index`; the same records, read 3-8x faster). 3: the ``rig``
+member (``multifov`` for rigs of 7-13 deg cameras)."""
 
 
 def _outdated(path: Path) -> str | None:

@@ -266,8 +266,12 @@ def _search_plan(db: NavDatabase | NavDatabaseSet, cameras: list[Camera], method
         members, deepest = [db], db
     fov = max(cam.fov_deg for cam in cameras)
     method_lists = [resolve(m, method, fov_deg=fov, sigma_px=sigma_px) for m in members]
-    if method == "auto":
-        method_lists = [_rig_methods(ms, rig=len(cameras) > 1) for ms in method_lists]
+    if method == "auto" and len(cameras) > 1:
+        method_lists = [_rig_methods(ms) for ms in method_lists]
+    elif method == "auto" and any(ms != [RIG_METHOD] for ms in method_lists):
+        # one camera: a member that holds the rig method alone (the default set's ``rig``) is
+        # left to rigs when another member serves the camera
+        method_lists = [[] if ms == [RIG_METHOD] else ms for ms in method_lists]
     if len(cache) >= PLAN_CACHE_SIZE:
         cache.clear()
     cache[key] = (_plan(members, method_lists), deepest)
@@ -281,16 +285,12 @@ mountings, so it proves frames that no single camera could, e.g. (2, 2) or (1, 3
 camera (``python -m bench.bench_rig``)."""
 
 
-def _rig_methods(methods: list[str], *, rig: bool) -> list[str]:
-    """``auto``'s methods of one member for a rig frame or a one-camera frame: on a rig,
-    :data:`RIG_METHOD` right after the first (fast) method, so that it is the fallback that runs
-    when the first pass misses; on one camera it is left out (unless it is all the member holds):
-    the other methods prove what it can there, faster."""
+def _rig_methods(methods: list[str]) -> list[str]:
+    """``auto``'s methods of one member for a rig frame: :data:`RIG_METHOD` right after the
+    first (fast) method, so that it is the fallback that runs when the first pass misses."""
     if RIG_METHOD not in methods:
         return methods
     rest = [m for m in methods if m != RIG_METHOD]
-    if not rig:
-        return rest
     return [rest[0], RIG_METHOD, *rest[1:]] if rest else [RIG_METHOD]
 
 

@@ -13,13 +13,27 @@ from service.core.sim import SimConfig, simulate_frames
 from service.core.sim_rig import gf7_rig, simulate_rig_frames
 
 
-def test_the_rig_method_follows_the_first_pass_on_a_rig_and_is_left_out_on_one_camera() -> None:
-    held = ["quad", "maxangle", "multifov", "pyramid"]
-    assert _rig_methods(held, rig=True) == ["quad", "multifov", "maxangle", "pyramid"]
-    assert _rig_methods(held, rig=False) == ["quad", "maxangle", "pyramid"]
-    assert _rig_methods(["multifov"], rig=True) == ["multifov"]
-    assert _rig_methods(["multifov"], rig=False) == []
-    assert _rig_methods(["quad", "pyramid"], rig=True) == ["quad", "pyramid"]
+def test_the_rig_method_follows_the_first_pass_on_a_rig() -> None:
+    assert _rig_methods(["quad", "maxangle", "multifov", "pyramid"]) == ["quad", "multifov", "maxangle", "pyramid"]
+    assert _rig_methods(["multifov"]) == ["multifov"]
+    assert _rig_methods(["quad", "pyramid"]) == ["quad", "pyramid"]
+
+
+def test_one_camera_keeps_the_rig_method_where_nothing_else_serves(tmp_path) -> None:
+    """A database of the rig method alone still answers one camera with it (``auto``); one
+    that holds others keeps it last, as before."""
+    from service.core.navdb import build_database, open_database
+    from service.core.navdb.builder import BuildConfig
+
+    cam = PRESETS["seed001"].camera
+    only = open_database(build_database(tmp_path / "only", BuildConfig(
+        fov_min_deg=8.0, fov_max_deg=13.0, mag_limit=5.0, methods=("multifov",))))
+    plan, _ = _search_plan(only, [cam], "auto", 0.5)
+    assert [methods for _, methods in plan] == [["multifov"]]
+    both = open_database(build_database(tmp_path / "both", BuildConfig(
+        fov_min_deg=8.0, fov_max_deg=13.0, mag_limit=5.0, methods=("quad", "multifov"))))
+    plan, _ = _search_plan(both, [cam], "auto", 0.5)
+    assert [m for _, methods in plan for m in methods] == ["quad", "multifov"]
 
 
 def test_the_default_set_searches_its_rig_member_for_rigs_only(default_set_db: NavDatabaseSet) -> None:

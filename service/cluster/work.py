@@ -10,6 +10,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import orjson
 from distributed import WorkerPlugin, get_worker
 
 from .partition import Partition, read_lines
@@ -99,7 +100,8 @@ def solve_partition(part: dict[str, Any], out_dir: str, method: str, sigma: floa
     numbered = [(p.first_line + i, line) for i, line in enumerate(read_lines(p)) if line.strip()]
 
     def answer(rec: Any, sol: Any) -> tuple[str, bool, bool | None, float, Any]:
-        return (json.dumps(sol.to_dict(rec.get("id"))), sol.solved, correct_against_record(rec, sol),
+        # orjson: ~2 us an answer where json.dumps takes ~29 (the same JSON as skyfix solve's lines)
+        return (orjson.dumps(sol.to_dict(rec.get("id"))).decode(), sol.solved, correct_against_record(rec, sol),
                 sol.timings_ms.get("total", 0.0), rec.get("id"))
 
     results = solve_many([line for _, line in numbered], db, method=method,

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from collections import Counter
 from itertools import islice
@@ -44,9 +43,9 @@ def solve_frames(
     database = open_database(resolve_db(db))
     warm_up(database)  # before the clock: frames/s below is of solving, not of starting
     options = SolveOptions(centroid_sigma_px=sigma)
-    n_workers = workers or _cores()
     stream = sys.stdin if str(frames) == "-" else open(frames)
-    pool = SolvePool(database, method=method, options=options, workers=n_workers, then=_answer, return_errors=True)
+    pool = SolvePool(database, method=method, options=options, workers=workers, then=_answer, return_errors=True)
+    n_workers = pool.workers  # default: the cores this process may use
     times: list[float] = []
     n = solved = wrong = checked = 0
     reasons: Counter[str] = Counter()
@@ -93,10 +92,6 @@ def solve_frames(
         f"{n / max(wall, 1e-9):.0f} frames/s on {n_workers} worker(s)"
         + (f"; no_solution by reason: {why}" if why else "")
     )
-
-
-def _cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 def _answer(rec: dict[str, Any], sol: Any) -> tuple[str, bool, str | None, bool | None, float]:

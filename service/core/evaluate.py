@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import math
-from itertools import accumulate
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-
+from itertools import accumulate
 
 from .attitude import ARCSEC_PER_RAD
 from .types import MatchedStars, Solution

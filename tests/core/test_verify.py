@@ -100,6 +100,33 @@ def test_marginal_answers_agree_on_consistent_pairs_despite_roll(seed000_db, fra
     assert ver.best_marginal() is None  # one observed star, two catalogue stars
 
 
+def test_a_hypothesis_a_marginal_answer_names_is_counted_not_checked(seed000_db, frame, monkeypatch) -> None:
+    """A frame proven marginally through one triangle is proven through most of its others: the
+    screen counts those as trials (the later bounds stay as they were) without checking them
+    again; a hypothesis that pairs one of their stars otherwise is checked."""
+    ver = _verifier(seed000_db, frame)
+    hip = np.asarray(seed000_db.stars.hip)
+    hips = frame.hip[ver.obs.index]
+    rows = [(i, int(np.flatnonzero(hip == h)[0])) for i, h in enumerate(hips) if h >= 0 and (hip == h).any()]
+    o, c = np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
+    truth = quat_to_matrix(np.asarray(frame.quaternion))
+    ver.marginal = [Verified(o[:8], c[:8], truth, 1e-8, 10)]
+    checked: list[list[int]] = []
+    real_check = Verifier.check
+
+    def check(self, obs_idx, cat_idx, **kw):
+        checked.append(list(obs_idx))
+        return real_check(self, obs_idx, cat_idx, **kw)
+
+    monkeypatch.setattr(Verifier, "check", check)
+    assert ver.names_marginal(o[[3, 1, 5]], c[[3, 1, 5]]) and not ver.names_marginal(o[[3, 1, 9]], c[[3, 1, 9]])
+    before = ver.trials
+    assert ver.screen_and_check(o[[3, 1, 5]], c[[3, 1, 5]][None]) is None
+    assert ver.trials == before + 1 and checked == []
+    swapped = c[[3, 1, 5]][[1, 0, 2]]  # the same stars, another pairing
+    assert not ver.names_marginal(o[[3, 1, 5]], swapped)
+
+
 def test_sky_grid_agrees_with_the_kd_tree(seed000_db) -> None:
     vec = np.asarray(seed000_db.stars.vec)
     grid = build_sky_grid(vec)

@@ -48,12 +48,19 @@ def screen_hits(obs_vec: FloatArray, obs_tris: IntArray, cands: IntArray, others
 def _frame(a: np.ndarray, b: np.ndarray, c: np.ndarray, out: np.ndarray) -> float:
     """Columns of ``out`` (3, 3): the triangle frame of ``a, b, c``; returns the triple
     product ``a . (b x c)`` (its sign is the handedness)."""
-    t1x, t1y, t1z = a[0] + b[0] + c[0], a[1] + b[1] + c[1], a[2] + b[2] + c[2]
-    n = math.sqrt(t1x * t1x + t1y * t1y + t1z * t1z)
-    t1x, t1y, t1z = t1x / n, t1y / n, t1z / n
-    t2x = t1y * a[2] - t1z * a[1]
-    t2y = t1z * a[0] - t1x * a[2]
-    t2z = t1x * a[1] - t1y * a[0]
+    frame_columns(a[0] + b[0] + c[0], a[1] + b[1] + c[1], a[2] + b[2] + c[2], a, out)
+    return triple_product(a, b, c)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def frame_columns(ux: float, uy: float, uz: float, w: np.ndarray, out: np.ndarray) -> None:
+    """Columns of ``out`` (3, 3): ``u`` normalised, ``u x w`` normalised, and their cross
+    product (a right-handed frame with its first axis along ``u``)."""
+    n = math.sqrt(ux * ux + uy * uy + uz * uz)
+    t1x, t1y, t1z = ux / n, uy / n, uz / n
+    t2x = t1y * w[2] - t1z * w[1]
+    t2y = t1z * w[0] - t1x * w[2]
+    t2z = t1x * w[1] - t1y * w[0]
     n = math.sqrt(t2x * t2x + t2y * t2y + t2z * t2z)
     if n == 0.0:
         n = 1e-300
@@ -63,7 +70,6 @@ def _frame(a: np.ndarray, b: np.ndarray, c: np.ndarray, out: np.ndarray) -> floa
     out[0, 2] = t1y * t2z - t1z * t2y
     out[1, 2] = t1z * t2x - t1x * t2z
     out[2, 2] = t1x * t2y - t1y * t2x
-    return triple_product(a, b, c)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -89,21 +95,31 @@ def _screen(obs_vec: np.ndarray, obs_tris: np.ndarray, cands: np.ndarray, others
         if (h_obs > 0) != (h_cat > 0):
             hits[k] = -1
             continue
-        # v_icrs = C O^T v_obs
-        count = 0
-        for m in range(len(others)):
-            row = others[m]
-            if row == o0 or row == o1 or row == o2:
-                continue
-            v = obs_vec[row]
-            l0 = fo[0, 0] * v[0] + fo[1, 0] * v[1] + fo[2, 0] * v[2]
-            l1 = fo[0, 1] * v[0] + fo[1, 1] * v[1] + fo[2, 1] * v[2]
-            l2 = fo[0, 2] * v[0] + fo[1, 2] * v[1] + fo[2, 2] * v[2]
-            px = fc[0, 0] * l0 + fc[0, 1] * l1 + fc[0, 2] * l2
-            py = fc[1, 0] * l0 + fc[1, 1] * l1 + fc[1, 2] * l2
-            pz = fc[2, 0] * l0 + fc[2, 1] * l1 + fc[2, 2] * l2
-            if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, c0, c1, c2):
-                count += 1
-        hits[k] = count
+        hits[k] = hits_under(fo, fc, obs_vec, others, o0, o1, o2, chord, cell, n_side, keys, starts, stars,
+                             star_vec, columns, c0, c1, c2)
     return hits
+
+
+@njit(cache=True, nogil=True, inline="always")
+def hits_under(fo: np.ndarray, fc: np.ndarray, obs_vec: np.ndarray, others: np.ndarray, o0: int, o1: int, o2: int,
+               chord: float, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray, stars: np.ndarray,
+               star_vec: np.ndarray, columns: np.ndarray, c0: int, c1: int, c2: int) -> int:
+    """How many rows ``others`` of ``obs_vec`` (other than ``o0..o2``) land within ``chord`` of a
+    catalogue star other than ``c0..c2`` under the attitude of the frames ``fo`` (observed) and
+    ``fc`` (catalogue): ``v_icrs = C O^T v_obs``."""
+    count = 0
+    for m in range(len(others)):
+        row = others[m]
+        if row == o0 or row == o1 or row == o2:
+            continue
+        v = obs_vec[row]
+        l0 = fo[0, 0] * v[0] + fo[1, 0] * v[1] + fo[2, 0] * v[2]
+        l1 = fo[0, 1] * v[0] + fo[1, 1] * v[1] + fo[2, 1] * v[2]
+        l2 = fo[0, 2] * v[0] + fo[1, 2] * v[1] + fo[2, 2] * v[2]
+        px = fc[0, 0] * l0 + fc[0, 1] * l1 + fc[0, 2] * l2
+        py = fc[1, 0] * l0 + fc[1, 1] * l1 + fc[1, 2] * l2
+        pz = fc[2, 0] * l0 + fc[2, 1] * l1 + fc[2, 2] * l2
+        if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, c0, c1, c2):
+            count += 1
+    return count
 

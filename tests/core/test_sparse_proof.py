@@ -73,3 +73,40 @@ def test_compiled_field_check_counts_as_the_kd_tree_version(seed000_db: NavDatab
             np.testing.assert_array_equal(got[1], want[1])
         total += int(want[1][:3].sum())
     assert total > 0  # the true attitudes explain observed stars
+
+
+def test_could_explain_never_counts_fewer_than_the_field_check(seed000_db: NavDatabase) -> None:
+    """``check_unique_triangle`` screens its density box with ``_could_explain`` before the field
+    check; the screen must count at least what the field check's ``explained`` counts, on every
+    triple (the true one, triples of neighbouring stars, random ones), or the box's count ``k`` of
+    consistent triangles would change."""
+    from service.core.sparse_proof import _could_explain, _sparse_attitudes
+
+    frames = simulate_frames(SEED000_CAMERA, 8, SimConfig(mag_limit=6.5, centroid_noise_px=0.5, false_stars=2), rng=5)
+    rng = np.random.default_rng(9)
+    hip_rows = {int(h): i for i, h in enumerate(np.asarray(seed000_db.stars.hip))}
+    tree = star_tree(seed000_db)
+    stars = np.asarray(seed000_db.stars.vec)
+    passed_random = checked_random = explained_true = 0
+    for frame in frames:
+        obs = _observation([(frame.centroids, SEED000_CAMERA, None)], [np.eye(3)])
+        verifier = Verifier(seed000_db, obs, match_radius_px=3.0)
+        hips = frame.hip[obs.index]
+        real = [i for i in range(len(obs)) if hips[i] >= 0 and int(hips[i]) in hip_rows][:3]
+        obs_idx = np.array(real)
+        true = np.array([hip_rows[int(hips[i])] for i in real])
+        neighbours = [tree.query(stars[t], k=6)[1][1:] for t in true]  # a vertex moved to a nearby star
+        near = np.array([[rng.choice(neighbours[0]) if j == 0 else true[0], rng.choice(neighbours[1]), true[2]]
+                         for j in range(30)])
+        random = rng.integers(0, len(stars), (300, 3))
+        random = random[[len(set(t)) == 3 for t in random.tolist()]]
+        near = near[[len(set(t)) == 3 for t in near.tolist()]]
+        box = np.concatenate([true[None], near, random])
+        could = _could_explain(verifier, box, obs_idx)
+        _, explained = _field_check(verifier, _sparse_attitudes(obs.vec[obs_idx], stars, box), box, obs_idx)
+        assert np.all(could >= explained)
+        explained_true += int(explained[0])
+        checked_random += len(random)
+        passed_random += int(np.count_nonzero(could[-len(random):] >= max(int(explained[0]), 1)))
+    assert explained_true > 0  # the true triangle explains the frame's other stars
+    assert passed_random < 0.05 * checked_random  # and the screen leaves few random triples to check

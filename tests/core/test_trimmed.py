@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import service.core.methods.multifov as multifov
 import service.core.trimmed as trimmed
 from bench.common import scenarios
 from service.core.evaluate import score
@@ -39,8 +40,14 @@ def test_multifov_near_miss_on_one_wide_camera_is_moved_to_the_right_basin(seed0
     assert s.correct and s.wrong_stars == 0
     assert len(sol.stars) >= 100  # the basin of the right attitude pairs most of the frame
     monkeypatch.setattr(trimmed, "SUSPECT_SIGMA", float("inf"))  # without the step: the near miss
+    # (as multifov searched then: one distance triangle a master; with the pairs of its 4 nearest
+    # stars it now also finds the right answer through another triangle, the near miss being marginal)
+    monkeypatch.setattr(multifov, "NEAR_STARS", 2)
     sol, s = solved()
     assert not s.correct and s.wrong_stars == 2 and len(sol.stars) == 16
+    monkeypatch.setattr(multifov, "NEAR_STARS", 4)
+    sol, s = solved()
+    assert s.correct and s.wrong_stars == 0
 
 
 def test_an_answer_whose_fit_matches_its_noise_is_left_alone(seed004_multifov) -> None:

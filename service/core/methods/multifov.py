@@ -90,6 +90,9 @@ RING_DEG = (0.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 """Rings (deg) around a star whose star densities set its chance votes (clipped to the pair table's reach)."""
 MAX_PARTNERS = 20
 """A master votes with at most this many of the brightest other stars of its camera."""
+NEAR_STARS = 4
+"""``robust``, one camera: the distance triangle pairs the master with two of its this-many
+nearest stars between ``r`` and ``R`` (the paper: the two nearest)."""
 
 
 class SegmentIndex:
@@ -346,12 +349,10 @@ class MultiFovMatcher:
         reference master; with one camera the distance triangle alone."""
         tol = ctx.tol_rad
         a = masters[ref]
-        dist_tris = self._distance_triangle(ctx, a, cands[ref], tol)
         others = [c for c in masters if c != ref and len(cands[c])]
-        if not others:
-            if dist_tris is None:
-                return None
-            return ctx.verifier.screen_and_check(dist_tris[0], dist_tris[1])
+        if not others:  # one camera: the distance triangle alone
+            return self._distance_triangles_alone(ctx, a, cands[ref], tol)
+        dist_tris = self._distance_triangle(ctx, a, cands[ref], tol)
         ctx.verifier.patterns += 1
         bright = self._brightness_triangle(ctx, masters, ref, cands, tol)
         if bright is None or dist_tris is None:
@@ -399,23 +400,56 @@ class MultiFovMatcher:
         ia, ib = np.nonzero(np.abs(cross_ab - d_ab) <= tol + self.mount_tol)
         return np.column_stack([ca[ia], cb[ib]]).astype(np.int64)
 
-    def _distance_triangle(self, ctx: SolveContext, a: int, cand_a: IntArray,
-                           tol: float) -> tuple[IntArray, IntArray] | None:
-        """Observed ``(a, d, e)`` and catalogue triples for it: ``d``, ``e`` the two stars of
-        ``a``'s camera between ``r`` and ``R`` nearest ``a``."""
+    def _near_stars(self, ctx: SolveContext, a: int, tol: float, k: int) -> IntArray:
+        """The ``k`` stars of ``a``'s camera between ``r`` and ``R`` nearest ``a``, nearest first."""
         obs = ctx.obs
-        if len(cand_a) == 0:
-            return None
         cam = int(obs.camera[a])
         rows = obs.by_camera[cam]
         rows = rows[rows != a]
         da = np.asarray(angle_between(obs.vec[a][None, :], obs.vec[rows]))
         r_outer = min(math.radians(obs.cameras[cam].fov_deg), self.max_angle - tol)
         ok = (da > math.radians(R_INNER_DEG)) & (da < r_outer)
-        near = rows[ok][np.argsort(da[ok], kind="stable")][:2]
+        return rows[ok][np.argsort(da[ok], kind="stable")][:k]
+
+    def _distance_triangles_alone(self, ctx: SolveContext, a: int, cand_a: IntArray,
+                                  tol: float) -> Verified | None:
+        """One camera: the distance triangle of master ``a`` screened and checked. The paper's
+        triangle takes the two stars nearest the master; ``robust`` also tries the other pairs
+        of its ``NEAR_STARS`` nearest, nearest pairs first, so that one false or missing star
+        among the two nearest does not spoil the attempt (one camera at 0.5 px with 2 false
+        stars: see docs/methods.md, multifov)."""
+        if len(cand_a) == 0:
+            return None
+        near = self._near_stars(ctx, a, tol, NEAR_STARS if self.mode == "robust" else 2)
+        pairs = sorted(((i, j) for i in range(len(near)) for j in range(i + 1, len(near))),
+                       key=lambda t: (t[1], t[0]))
+        for i, j in pairs:
+            if ctx.expired():
+                break
+            found = self._triangle_of(ctx, a, int(near[i]), int(near[j]), cand_a, tol)
+            if found is None:
+                continue
+            found = ctx.verifier.screen_and_check(found[0], found[1])
+            if found is not None:
+                return found
+        return None
+
+    def _distance_triangle(self, ctx: SolveContext, a: int, cand_a: IntArray,
+                           tol: float) -> tuple[IntArray, IntArray] | None:
+        """Observed ``(a, d, e)`` and catalogue triples for it: ``d``, ``e`` the two stars of
+        ``a``'s camera between ``r`` and ``R`` nearest ``a``."""
+        if len(cand_a) == 0:
+            return None
+        near = self._near_stars(ctx, a, tol, 2)
         if len(near) < 2:
             return None
-        d, e = int(near[0]), int(near[1])
+        return self._triangle_of(ctx, a, int(near[0]), int(near[1]), cand_a, tol)
+
+    def _triangle_of(self, ctx: SolveContext, a: int, d: int, e: int, cand_a: IntArray,
+                     tol: float) -> tuple[IntArray, IntArray] | None:
+        """Observed ``(a, d, e)`` and its catalogue triples with ``a`` among ``cand_a`` (the
+        same handedness), or None."""
+        obs = ctx.obs
         tri = np.array([a, d, e])
         ang = lambda i, j: float(angle_between(obs.vec[i], obs.vec[j]))  # noqa: E731
         e_ad = self._edges(ang(a, d), tol, cand_a)

@@ -183,3 +183,38 @@ def test_cli_solves_a_rig_recording(db: NavDatabase, tmp_path: Path) -> None:
     assert [o["id"] for o in out] == list(range(6))
     assert all(o["status"] == "solved" and {s["camera"] for s in o["stars"]} == {0, 1} for o in out)
     assert "6/6 identified" in res.stderr and "0 wrong of 6" in res.stderr
+
+
+def test_one_camera_survives_a_false_star_beside_the_master(db: NavDatabase, monkeypatch: pytest.MonkeyPatch) -> None:
+    """One camera: the distance triangle of the paper takes the master's two nearest stars, so a
+    false star nearest the master spoiled the attempt; the pairs of its ``NEAR_STARS`` nearest
+    find the triangle of two real ones (the master alone is tried: ``attempts=1``)."""
+    from service.core.methods import multifov
+    from service.core.types import Centroids
+
+    frames = simulate_frames(CAMERA, 20, SimConfig(centroid_noise_px=0.5), rng=31)
+    rng = np.random.default_rng(4)
+    spoiled = []
+    for f in frames:
+        c = f.centroids
+        master = int(np.argmax(c.flux))
+        for _ in range(100):  # 0.6 deg from the master, inside the image: nearer than any real star there
+            ang = rng.uniform(0, 2 * np.pi)
+            xy = c.xy[master] + 0.6 * CAMERA.f_px * math.pi / 180 * np.array([np.cos(ang), np.sin(ang)])
+            if 0 <= xy[0] < CAMERA.width and 0 <= xy[1] < CAMERA.height:
+                break
+        spoiled.append((Centroids(np.vstack([c.xy, xy]), np.append(c.flux, np.median(c.flux))),
+                        f.hip.tolist() + [-1], f))
+    matcher = MultiFovMatcher(db, attempts=1)
+    db.__dict__.setdefault("_matchers", {})["multifov"] = matcher
+    try:
+        rates = {}
+        for near in (2, multifov.NEAR_STARS):
+            monkeypatch.setattr(multifov, "NEAR_STARS", near)
+            sols = [solve(cents, CAMERA, db, method="multifov", options=OPTIONS) for cents, _, _ in spoiled]
+            scores = [score(s, f.quaternion, hip, blends=f.blends) for s, (_, hip, f) in zip(sols, spoiled, strict=True)]
+            assert all(s.correct and s.wrong_stars == 0 for s in scores if s.solved)
+            rates[near] = sum(s.solved for s in scores)
+    finally:
+        db.__dict__["_matchers"].pop("multifov")
+    assert rates[multifov.NEAR_STARS] >= 18 and rates[2] <= 10, rates

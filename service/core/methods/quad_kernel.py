@@ -30,6 +30,7 @@ from numba import njit
 from ..match import _match_rig, _refine, _wahba_pairs
 from ..skygrid import collect_within, has_star_within
 from ..attitude import wahba_kernel
+from ..prefetch import prefetch
 from ..verify import SETTLE_FACTORS
 from .quad_build import FINE_BITS, FINE_STEPS, FINGER_BITS, N_RATIO_BINS, combine_key, key_hash, row_angle, sorted_edges
 
@@ -177,6 +178,18 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
                             hi[i] = min(hi[i], N_RATIO_BINS - 1)
                         total *= hi[i] - lo[i] + 1
                     probes += total
+                    # every probe's first table word requested at once: the table (32-64 MB)
+                    # misses the cache on nearly every probe, and the scan below would wait for
+                    # each miss in turn
+                    for i in range(6):
+                        cur[i] = lo[i]
+                    for _ in range(total):
+                        prefetch(table, np.int64(key_hash(combine_key(cur)) & mask))
+                        for i in range(6):
+                            cur[i] += 1
+                            if cur[i] <= hi[i]:
+                                break
+                            cur[i] = lo[i]
                     for i in range(6):
                         cur[i] = lo[i]
                     for i in range(6):  # where the query's range lies inside its first and last bin

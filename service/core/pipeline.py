@@ -98,9 +98,15 @@ took 130-500 ms. Measured with ``python -m bench.profile_default`` (docs/perform
 EXHAUSTED_BUDGET_MS = 50.0
 """Time the first fallback gets after ``quad`` searched a frame of more than ``QUERY_STARS``
 stars exhaustively (see ``QUAD_REFUSE_STARS``; the real image tree.jpg needs most of it)."""
-FEW_STARS_BUDGET_MS = 20.0
-"""Time the first fallback gets after ``quad`` searched a frame of 5-7 stars exhaustively (it
-proves them in 1-6 ms; see ``QUAD_REFUSE_STARS``)."""
+FEW_STARS_BUDGET_MS = 3.0
+"""Time a frame of 5-7 stars that ``quad`` searched exhaustively may take in all, counted from
+its start, before the first fallback stops starting work (see ``QUAD_REFUSE_STARS``; a batch of
+triangles already started finishes, ~1 ms at most). Session 13, 3,758 frames of 5-7 stars (the
+five paper cameras at 0.5/1/2 px with 0 and 2 false stars, 1,500 frames a point): the 892 the
+fallback proved took 0.41 ms median and 1.05 ms at most for the whole solve, while those it
+could not prove took up to 13 ms (seed 000 at 2 px with 2 false stars: ~5,000 chance
+candidates on two members). It was 20 ms from the fallback's start when the fallback took
+1-6 ms to prove them (session 10)."""
 
 SPARSE_PROOF_METHODS = frozenset({"triangle", "multifov"})
 """Methods that can prove a frame of fewer stars than the verifier's ``min_matches`` (4): the
@@ -109,6 +115,13 @@ verifier needs a pair beyond the pattern, so only ``triangle``'s unique-triangle
 (``methods/rig_proof.py``, 3-star rig frames) name a 3-star frame; the others are skipped on it
 (seed 002 at 1.5 px, 3 centroids of which one false: 0.8 -> 0.2 ms median; a true 3-star frame's
 time is triangle's own, ~12 ms)."""
+
+TRIANGLE_PROOF_METHODS = frozenset({"maxangle", "pyramid"})
+"""``auto``'s fallbacks whose only proof is the verifier's bound on a triangle and the stars
+beyond it: skipped where even every star matching could not pass it (``Verifier.could_prove``,
+e.g. any 4-star frame of seed 000's 1024-px camera, where ``pyramid`` spent up to 16 ms at 2 px
+on frames nothing could prove; ``triangle``'s unique-triangle proof and ``multifov``'s rig proof
+do not use that bound)."""
 
 COMPILED_FIRST_PASS = True
 """Run ``auto``'s first pass as one compiled call (:mod:`service.core.first_pass`); False takes
@@ -198,8 +211,10 @@ def solve_rig(
                 if QUAD_REFUSE_STARS <= len(obs) <= QUERY_STARS:
                     continue  # fast refusal: the fallbacks would search the same stars (see QUAD_REFUSE_STARS)
                 methods = methods[:1]  # the first fallback alone (maxangle; see QUAD_REFUSE_STARS)
-                budget = EXHAUSTED_BUDGET_MS if len(obs) > QUERY_STARS else FEW_STARS_BUDGET_MS
-                search_deadline = min(search_deadline, time.perf_counter() + budget / 1e3)
+                if len(obs) > QUERY_STARS:
+                    search_deadline = min(search_deadline, time.perf_counter() + EXHAUSTED_BUDGET_MS / 1e3)
+                else:  # counted from the frame's start: the whole frame's time (FEW_STARS_BUDGET_MS)
+                    search_deadline = min(search_deadline, t0 + FEW_STARS_BUDGET_MS / 1e3)
             db = member
             found, used, trials = _identify(obs, db, methods, sigma, options, search_deadline, hint, trials, tried,
                                             misses)
@@ -345,6 +360,8 @@ def _identify(
         methods = [name for name in methods if name in SPARSE_PROOF_METHODS]
     used = methods[-1] if methods else ""
     for name in methods:
+        if name in TRIANGLE_PROOF_METHODS and not verifier.could_prove(3):
+            continue  # no answer of this frame could pass the bound (Verifier.could_prove)
         if tried is not None:
             if tried and time.perf_counter() > deadline:
                 break

@@ -133,6 +133,23 @@ class Verifier:
         """True once a marginal answer has had ``confirm_patterns`` patterns to be beaten."""
         return self._first_marginal_at is not None and self.patterns - self._first_marginal_at >= self.confirm_patterns
 
+    def could_prove(self, hypothesis_stars: int) -> bool:
+        """Could an answer whose hypothesis holds ``hypothesis_stars`` observed stars pass the
+        bound on this frame at all? Its best case pairs every observed star: ``n_extra =
+        n_free = n - h``, and ``p`` is at least ``n pi r^2 / area`` (each pair is a prediction
+        inside an image), so ``P >= (n pi r^2 / area)^(n - h) * trials``. False when that
+        exceeds ``max_false_prob`` (or no star is left beyond the hypothesis): a method
+        proving by this bound alone cannot answer. A 4-star frame of a 1024-px camera never
+        can (``4 pi 2.5^2 / 1024^2`` = 7.5e-5); one of seed 002's 4096-px camera can up to
+        ~1.5 px."""
+        n = len(self.obs)
+        extra = n - hypothesis_stars
+        if n < self.min_matches or extra < 1:
+            return False
+        area = sum(float(c.width) * float(c.height) for c in self.obs.cameras)
+        p = min(1.0, n * math.pi * self.match_radius_px ** 2 / area)
+        return p ** extra * max(self.trials, 1) <= self.max_false_prob
+
     def best_marginal(self) -> Verified | None:
         """The most probable marginal answer, or None if there is none or they disagree.
 

@@ -204,3 +204,31 @@ def test_after_warm_up_auto_compiles_nothing_more(default_set_db) -> None:
             solve(centroids, p.camera, default_set_db, options=SolveOptions(centroid_sigma_px=1.0))
     after = _compiled_signatures()
     assert {k: v for k, v in after.items() if v != before.get(k)} == {}
+
+
+def test_a_frame_no_answer_could_pass_skips_the_triangle_fallbacks(seed000_db, monkeypatch) -> None:
+    """``maxangle`` and ``pyramid`` prove a triangle by the stars beyond it; a 4-star frame of
+    this 1024-px camera could not pass the bound even with every star paired
+    (``Verifier.could_prove``), so neither runs. Five stars can, and both run."""
+    import service.core.pipeline as pipeline
+
+    four = solve(random_points(SEED000_CAMERA, 4, rng=5), SEED000_CAMERA, seed000_db)
+    assert not four.solved and not set(four.methods_tried) & pipeline.TRIANGLE_PROOF_METHODS
+    five = solve(random_points(SEED000_CAMERA, 5, rng=5), SEED000_CAMERA, seed000_db)
+    assert not five.solved and five.methods_tried == ("maxangle", "pyramid")
+    monkeypatch.setattr(pipeline, "TRIANGLE_PROOF_METHODS", frozenset())
+    four = solve(random_points(SEED000_CAMERA, 4, rng=5), SEED000_CAMERA, seed000_db)
+    assert four.methods_tried == ("maxangle", "pyramid")
+
+
+def test_few_star_frames_searched_in_full_get_the_frames_budget(default_set_db, monkeypatch) -> None:
+    """A frame of 5-7 stars that quad searched in full on every member gets the first fallback
+    only until ``FEW_STARS_BUDGET_MS`` after the frame's start; with none left it does not start."""
+    import service.core.pipeline as pipeline
+
+    p = PRESETS["seed000"]
+    frame = random_points(p.camera, 6, rng=11)
+    opts = SolveOptions(centroid_sigma_px=1.0)
+    assert solve(frame, p.camera, default_set_db, options=opts).methods_tried == ("quad", "maxangle")
+    monkeypatch.setattr(pipeline, "FEW_STARS_BUDGET_MS", 0.0)
+    assert solve(frame, p.camera, default_set_db, options=opts).methods_tried == ("quad",)

@@ -127,6 +127,27 @@ def test_a_hypothesis_a_marginal_answer_names_is_counted_not_checked(seed000_db,
     assert not ver.names_marginal(o[[3, 1, 5]], swapped)
 
 
+def test_could_prove_is_the_bound_of_every_star_matching(seed000_db) -> None:
+    """``could_prove(h)``: ``(n pi r^2 / area)^(n - h) * trials <= max_false_prob``, the best any
+    answer of n stars with an h-star hypothesis can do (every star paired, each pair a
+    prediction inside the image)."""
+    from service.core.sim import random_points
+
+    def verifier(camera, n, radius, trials=0):
+        obs = _observation([(random_points(camera, n, rng=n), camera, None)], [np.eye(3)])
+        return Verifier(seed000_db, obs, match_radius_px=radius, trials=trials)
+
+    fine = PRESETS["seed002"].camera  # 4096 px a side
+    assert not verifier(SEED000_CAMERA, 4, 2.5).could_prove(3)  # 4 pi 6.25 / 1024^2 = 7.5e-5
+    assert verifier(fine, 4, 2.5).could_prove(3)  # 4.7e-6
+    assert not verifier(fine, 4, 6.0).could_prove(3)  # 2.7e-5: seed 002 at 2 px
+    assert not verifier(fine, 4, 2.5, trials=3).could_prove(3)  # 1.4e-5
+    assert verifier(SEED000_CAMERA, 5, 2.5).could_prove(3)  # (9.4e-5)^2
+    assert not verifier(SEED000_CAMERA, 5, 2.5, trials=2000).could_prove(3)
+    assert not verifier(SEED000_CAMERA, 3, 2.5).could_prove(3)  # no star beyond the hypothesis
+    assert not verifier(SEED000_CAMERA, 4, 2.5).could_prove(4)
+
+
 def test_sky_grid_agrees_with_the_kd_tree(seed000_db) -> None:
     vec = np.asarray(seed000_db.stars.vec)
     grid = build_sky_grid(vec)

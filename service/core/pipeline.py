@@ -86,7 +86,7 @@ QUAD_REFUSE_STARS = 8
 pattern of its stars, on every member) without a proof is refused without the fallback methods:
 they would search the same stars. Any other frame of 5 stars or more that ``quad`` searched
 exhaustively gets the first fallback alone (``maxangle`` on the default set), on each member,
-for ``FEW_STARS_BUDGET_MS`` (5-7 stars) or ``EXHAUSTED_BUDGET_MS`` (more than ``QUERY_STARS``;
+for ``FEW_STARS_MAX_TRIALS`` hypotheses (5-7 stars) or ``EXHAUSTED_BUDGET_MS`` (more than ``QUERY_STARS``;
 running it on the first member only saved ~0.3 ms on a third of seed 002's frames but lost 6
 frames in 100,000 of ``bench.bench_wrong``, which a deeper member's pattern stars prove): one
 of 5-7 stars may still be proven by a triangle and two more stars where 4 + 1 is not enough,
@@ -98,15 +98,15 @@ took 130-500 ms. Measured with ``python -m bench.profile_default`` (docs/perform
 EXHAUSTED_BUDGET_MS = 50.0
 """Time the first fallback gets after ``quad`` searched a frame of more than ``QUERY_STARS``
 stars exhaustively (see ``QUAD_REFUSE_STARS``; the real image tree.jpg needs most of it)."""
-FEW_STARS_BUDGET_MS = 3.0
-"""Time a frame of 5-7 stars that ``quad`` searched exhaustively may take in all, counted from
-its start, before the first fallback stops starting work (see ``QUAD_REFUSE_STARS``; a batch of
-triangles already started finishes, ~1 ms at most). Session 13, 3,758 frames of 5-7 stars (the
-five paper cameras at 0.5/1/2 px with 0 and 2 false stars, 1,500 frames a point): the 892 the
-fallback proved took 0.41 ms median and 1.05 ms at most for the whole solve, while those it
-could not prove took up to 13 ms (seed 000 at 2 px with 2 false stars: ~5,000 chance
-candidates on two members). It was 20 ms from the fallback's start when the fallback took
-1-6 ms to prove them (session 10)."""
+FEW_STARS_MAX_TRIALS = 1000
+"""Hypotheses the first fallback may add, over every member, after ``quad`` searched a frame
+of 5-7 stars exhaustively (see ``QUAD_REFUSE_STARS``): a count of work, so the same frame gets
+the same answer on a loaded machine, as the issue asks of budgets. Session 13, 2,593 frames of
+5-7 stars that reached the fallback (the five paper cameras at 0.5/1/2 px with 0/2/5 false
+stars): the 875 it proved took at most 220 hypotheses (p99 103), those it could not prove up
+to 16,455 (p99 617; seed 000 at 2 px: up to 13 ms). Until session 13 the fallback had 20 ms
+of the clock; a 3-ms clock budget tried here refused 2 frames of 47,500 it proves in 0.4-0.7
+ms when the machine stalled."""
 
 SPARSE_PROOF_METHODS = frozenset({"triangle", "multifov"})
 """Methods that can prove a frame of fewer stars than the verifier's ``min_matches`` (4): the
@@ -205,6 +205,7 @@ def solve_rig(
     # the coincidence bound is multiplied by
     misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?
     search_deadline = deadline  # shortened after an exhaustive quad miss (EXHAUSTED_BUDGET_MS)
+    trial_limit: int | None = None  # set after an exhaustive quad miss of 5-7 stars (FEW_STARS_MAX_TRIALS)
     for sigma in sigmas:
         for member, methods in plan:
             if misses and all(misses) and "quad" not in methods:
@@ -213,11 +214,11 @@ def solve_rig(
                 methods = methods[:1]  # the first fallback alone (maxangle; see QUAD_REFUSE_STARS)
                 if len(obs) > QUERY_STARS:
                     search_deadline = min(search_deadline, time.perf_counter() + EXHAUSTED_BUDGET_MS / 1e3)
-                else:  # counted from the frame's start: the whole frame's time (FEW_STARS_BUDGET_MS)
-                    search_deadline = min(search_deadline, t0 + FEW_STARS_BUDGET_MS / 1e3)
+                elif trial_limit is None:  # over every member's fallback (FEW_STARS_MAX_TRIALS)
+                    trial_limit = trials + FEW_STARS_MAX_TRIALS
             db = member
             found, used, trials = _identify(obs, db, methods, sigma, options, search_deadline, hint, trials, tried,
-                                            misses)
+                                            misses, trial_limit)
             if found is not None or time.perf_counter() > search_deadline:
                 break
         if found is not None or time.perf_counter() > search_deadline:
@@ -347,15 +348,16 @@ def _refine(
 def _identify(
     obs: Observation, db: NavDatabase, methods: list[str], sigma: float, options: SolveOptions,
     deadline: float, hint: tuple[Quaternion, float] | None, trials: int, tried: list[str] | None = None,
-    misses: list[bool] | None = None,
+    misses: list[bool] | None = None, trial_limit: int | None = None,
 ) -> tuple[Verified | None, str, int]:
     """One pass of every method at centroid error ``sigma`` (px); ``trials`` hypotheses were
     already tried on this frame (they count in the coincidence bound). Appends the name of each
-    method it runs to ``tried``; stops at ``deadline`` without starting another method."""
+    method it runs to ``tried``; stops at ``deadline`` (or once ``trial_limit`` hypotheses were
+    tried) without starting another method."""
     radius = options.match_radius_px or max(2.5, 3.0 * sigma)
     tol = (3.0 * math.sqrt(2.0) * sigma + 0.5) * obs.pixel_scale_rad
     verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob, trials=trials,
-                        deadline=deadline)
+                        deadline=deadline, trial_limit=trial_limit)
     if len(obs) < verifier.min_matches:  # only a sparse proof can name so few stars (SPARSE_PROOF_METHODS)
         methods = [name for name in methods if name in SPARSE_PROOF_METHODS]
     used = methods[-1] if methods else ""
@@ -363,7 +365,7 @@ def _identify(
         if name in TRIANGLE_PROOF_METHODS and not verifier.could_prove(3):
             continue  # no answer of this frame could pass the bound (Verifier.could_prove)
         if tried is not None:
-            if tried and time.perf_counter() > deadline:
+            if tried and (time.perf_counter() > deadline or verifier.over_limit()):
                 break
             tried.append(name)
         ctx = SolveContext(obs, verifier, tol, deadline, options.max_stars)

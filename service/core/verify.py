@@ -121,6 +121,8 @@ class Verifier:
     screen_stars: int = 6
     deadline: float = math.inf
     """``time.perf_counter()`` after which no further hypothesis is checked."""
+    trial_limit: int | None = None
+    """Hypotheses (``trials``) after which no further one is checked: a budget of work."""
     marginal: list[Verified] = field(default_factory=list)
     exhausted: bool = False
     """Set by a method (``quad``) that looked up every pattern of the frame's brightest stars
@@ -132,6 +134,10 @@ class Verifier:
     def settled(self) -> bool:
         """True once a marginal answer has had ``confirm_patterns`` patterns to be beaten."""
         return self._first_marginal_at is not None and self.patterns - self._first_marginal_at >= self.confirm_patterns
+
+    def over_limit(self) -> bool:
+        """Has the search tried its ``trial_limit`` hypotheses?"""
+        return self.trial_limit is not None and self.trials >= self.trial_limit
 
     def could_prove(self, hypothesis_stars: int) -> bool:
         """Could an answer whose hypothesis holds ``hypothesis_stars`` observed stars pass the
@@ -222,7 +228,7 @@ class Verifier:
         order = np.argsort(-hits, kind="stable")
         order = order[hits[order] >= (1 if len(self.obs) > 3 else 0)]
         for row in order[:8]:
-            if time.perf_counter() > self.deadline:
+            if time.perf_counter() > self.deadline or self.over_limit():
                 break
             if self.marginal and self.names_marginal(obs_tris[row], cands[row]):
                 self.trials += 1  # a trial all the same, as check() would count it

@@ -221,14 +221,27 @@ def test_a_frame_no_answer_could_pass_skips_the_triangle_fallbacks(seed000_db, m
     assert four.methods_tried == ("maxangle", "pyramid")
 
 
-def test_few_star_frames_searched_in_full_get_the_frames_budget(default_set_db, monkeypatch) -> None:
+def test_few_star_frames_searched_in_full_get_a_budget_of_hypotheses(default_set_db, monkeypatch) -> None:
     """A frame of 5-7 stars that quad searched in full on every member gets the first fallback
-    only until ``FEW_STARS_BUDGET_MS`` after the frame's start; with none left it does not start."""
+    for ``FEW_STARS_MAX_TRIALS`` more hypotheses over all members (a count, not the clock: the
+    same frame gets the same answer on a loaded machine); with none it does not start."""
     import service.core.pipeline as pipeline
 
     p = PRESETS["seed000"]
     frame = random_points(p.camera, 6, rng=11)
     opts = SolveOptions(centroid_sigma_px=1.0)
-    assert solve(frame, p.camera, default_set_db, options=opts).methods_tried == ("quad", "maxangle")
-    monkeypatch.setattr(pipeline, "FEW_STARS_BUDGET_MS", 0.0)
+    full = solve(frame, p.camera, default_set_db, options=opts)
+    assert full.methods_tried == ("quad", "maxangle")
+    monkeypatch.setattr(pipeline, "FEW_STARS_MAX_TRIALS", 0)
     assert solve(frame, p.camera, default_set_db, options=opts).methods_tried == ("quad",)
+    monkeypatch.setattr(pipeline, "FEW_STARS_MAX_TRIALS", 1)  # one screen's worth, then no further check
+    seen: list[int] = []
+    real = pipeline.Verifier.check
+
+    def check(self, obs_idx, cat_idx, **kw):
+        seen.append(self.trials)
+        return real(self, obs_idx, cat_idx, **kw)
+
+    monkeypatch.setattr(pipeline.Verifier, "check", check)
+    assert not solve(frame, p.camera, default_set_db, options=opts).solved
+    assert seen == []  # the first screen used up the budget before any check

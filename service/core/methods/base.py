@@ -42,8 +42,9 @@ class SolveContext:
     max_stars: int = 12
 
     def expired(self) -> bool:
-        """Out of time, or a marginal answer has had its chance to be beaten."""
-        return time.perf_counter() > self.deadline or self.verifier.settled()
+        """Out of time or of hypotheses (the verifier's ``trial_limit``), or a marginal answer
+        has had its chance to be beaten."""
+        return time.perf_counter() > self.deadline or self.verifier.settled() or self.verifier.over_limit()
 
 
 class Matcher(Protocol):

@@ -110,6 +110,10 @@ def check_unique_triangle(
         # field check on the few that pass (the same count: ~0.9 us an attitude went to
         # gathering its field)
         box = box[_could_explain(verifier, box, obs_idx) >= explained[0]]
+    elif len(box) and len(obs) == len(obs_idx):
+        # nothing else observed: a box attitude counts only if no other catalogue star lies in
+        # its image, so one such star well inside it rules the attitude out (_star_in_view)
+        box = box[~_star_in_view(verifier, box, obs_idx)]
     if len(box):
         rs = _sparse_attitudes(obs.vec[obs_idx], stars, box)
         box_unseen, box_explained = _field_check(verifier, rs, box, obs_idx)
@@ -162,10 +166,13 @@ def _could_explain(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> In
 def _explain_kernel(obs_vec: np.ndarray, tri: np.ndarray, cands: np.ndarray, others: np.ndarray, chord: float,
                     cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray, stars: np.ndarray,
                     star_vec: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Per triple ``cands[k]``: how many rows ``others`` of ``obs_vec`` (body) land within
+    ``chord`` of a catalogue star other than the triple under the TRIAD attitude of the
+    observed rows ``tri`` onto it (the frames of :func:`_sparse_attitudes`)."""
     out = np.zeros(len(cands), np.int64)
     fo = np.empty((3, 3))
     fc = np.empty((3, 3))
-    a = obs_vec[tri[0]]  # the frames of _sparse_attitudes: TRIAD on the first two stars
+    a = obs_vec[tri[0]]
     frame_columns(a[0], a[1], a[2], obs_vec[tri[1]], fo)
     for k in range(len(cands)):
         c0, c1, c2 = cands[k, 0], cands[k, 1], cands[k, 2]
@@ -174,6 +181,32 @@ def _explain_kernel(obs_vec: np.ndarray, tri: np.ndarray, cands: np.ndarray, oth
         out[k] = hits_under(fo, fc, obs_vec, others, -1, -1, -1, chord, cell, n_side, keys, starts, stars,
                             star_vec, columns, c0, c1, c2)
     return out
+
+
+def _star_in_view(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> IntArray:
+    """For each catalogue triple ``cands[k]`` matched to the observed rows ``obs_idx`` (under
+    the attitude :func:`_sparse_attitudes` gives it), of a frame with no other observed star:
+    is a catalogue star other than the triple within the circle about the principal point
+    that stays a match radius inside the image? Such a star is one :func:`_field_check`
+    counts as unseen (a pinhole image holds the circle, and it is among the field's nearest
+    stars to the boresight), so a triple marked True cannot count. All False (no test) for a
+    rig or a distorted camera."""
+    obs = verifier.obs
+    if len(obs.cameras) != 1 or obs.cameras[0].distortion:
+        return np.zeros(len(cands), np.bool_)
+    cam = obs.cameras[0]
+    r = verifier.match_radius_px
+    inner = min(cam.cx + 0.5 - r, cam.width - 0.5 - r - cam.cx, cam.cy + 0.5 - r, cam.height - 0.5 - r - cam.cy)
+    if inner <= 0:
+        return np.zeros(len(cands), np.bool_)
+    half = math.atan(inner / cam.f_px)
+    g = field_grid(verifier.db, math.degrees(half))
+    # the boresight (body: the mounting's third row) as one more "star" to look around
+    vec = np.vstack([obs.vec, np.asarray(obs.mountings[0], dtype=np.float64)[2]])
+    hits = _explain_kernel(vec, np.asarray(obs_idx, dtype=np.int64), np.ascontiguousarray(cands, dtype=np.int64),
+                           np.array([len(obs)], np.int64), 2 * math.sin(half / 2), g.cell, g.n_side, g.keys,
+                           g.starts, g.stars, g.vec, g.columns)
+    return hits > 0
 
 
 def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,

@@ -110,3 +110,32 @@ def test_could_explain_never_counts_fewer_than_the_field_check(seed000_db: NavDa
         passed_random += int(np.count_nonzero(could[-len(random):] >= max(int(explained[0]), 1)))
     assert explained_true > 0  # the true triangle explains the frame's other stars
     assert passed_random < 0.05 * checked_random  # and the screen leaves few random triples to check
+
+
+def test_a_star_in_view_is_one_the_field_check_counts_unseen(seed000_db: NavDatabase) -> None:
+    """A 3-star frame: ``_star_in_view`` marks a box triple whose attitude puts another catalogue
+    star in the circle a match radius inside the image; the field check must count that triple
+    unseen (so dropping it cannot change the proof), and the screen must drop most triples."""
+    from service.core.sparse_proof import _sparse_attitudes, _star_in_view
+    from service.core.types import Centroids
+
+    frames = simulate_frames(SEED000_CAMERA, 8, SimConfig(mag_limit=6.5, centroid_noise_px=0.5), rng=6)
+    rng = np.random.default_rng(10)
+    hip_rows = {int(h): i for i, h in enumerate(np.asarray(seed000_db.stars.hip))}
+    stars = np.asarray(seed000_db.stars.vec)
+    marked = total = 0
+    for frame in frames:
+        real = [i for i in np.argsort(-frame.centroids.flux) if frame.hip[i] >= 0 and int(frame.hip[i]) in hip_rows][:3]
+        cents = Centroids(frame.centroids.xy[real], frame.centroids.flux[real])
+        obs = _observation([(cents, SEED000_CAMERA, None)], [np.eye(3)])
+        verifier = Verifier(seed000_db, obs, match_radius_px=3.0)
+        obs_idx = np.arange(3)
+        true = np.array([hip_rows[int(frame.hip[real[int(i)]])] for i in obs.index])
+        box = np.concatenate([true[None], rng.integers(0, len(stars), (300, 3))])
+        box = box[[len(set(t)) == 3 for t in box.tolist()]]
+        in_view = _star_in_view(verifier, box, obs_idx)
+        unseen, _ = _field_check(verifier, _sparse_attitudes(obs.vec[obs_idx], stars, box), box, obs_idx)
+        assert np.all(unseen[in_view] > 0)
+        marked += int(in_view.sum())
+        total += len(box)
+    assert marked > 0.8 * total

@@ -57,6 +57,7 @@ from bench.peers import cedar as cedar_mod
 from service.core.catalog import load_hipparcos, select_stars
 from service.core.methods import method_names
 from service.core.navdb import BuildConfig, build_database, open_database
+from service.core.pipeline import warm_up
 
 REAL_FOV = (6.0, 26.0)
 """Horizontal fields of the real images: 6.07 deg (openstartracker) to 25.4 deg (img_7660)."""
@@ -231,6 +232,7 @@ def run_real(args: argparse.Namespace, peers: Peers, pdir: Path) -> dict[str, An
                                          density_cap=12, density_radius_deg=4.0, methods=tuple(method_names())))
         build_s, what = time.perf_counter() - t0, "one database 5-32 deg, 7.0 Mv, density-capped"
     db = open_database(path)
+    warm_up(db)  # as default_set warms its own: the first frame does not carry the one-off set-up
     sky = [m for m in args.skyfix if m == "auto" or m in db.methods]
     stars = select_stars(load_hipparcos(), epoch=REAL_EPOCH, mag_limit=REAL_MAG, double_star_sep_deg=0.01)
     rows = StarRows.from_table(stars)

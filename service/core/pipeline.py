@@ -668,6 +668,15 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
             for n in (len(frame), 4):
                 halves = [Centroids(frame.xy[k:n:2], frame.flux[k:n:2]) for k in (0, 1)]
                 solve_rig([(h, camera, ident) for h in halves], db)
+    # the unique-triangle proof's box screens, which only a frame whose match proves locally
+    # reaches: called directly on a member's own 3- and 4-star frame (a first use compiled
+    # them inside a request: ~0.7-1 s)
+    from .sparse_proof import warm_up_screens
+
+    for member in members:
+        camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
+        frame = _own_frames(member, camera, n_tries=1)[0]
+        warm_up_screens(member, camera, frame)
 
 
 def _own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centroids]:

@@ -109,6 +109,47 @@ def has_star_within(px: float, py: float, pz: float, chord: float, cell: float, 
     return False
 
 
+@njit(cache=True, nogil=True)
+def has_star_within_away(px: float, py: float, pz: float, chord: float, cell: float, n_side: int,
+                         keys: np.ndarray, starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
+                         columns: np.ndarray, skip0: int, skip1: int, skip2: int, away: np.ndarray,
+                         away_chord: float) -> bool:
+    """:func:`has_star_within`, counting only stars farther than ``away_chord`` from every
+    point of ``away`` ``(M, 3)``."""
+    lo_x = max(int(math.floor((px - chord + 1.0) / cell)), 0)
+    hi_x = min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1)
+    lo_y = max(int(math.floor((py - chord + 1.0) / cell)), 0)
+    hi_y = min(int(math.floor((py + chord + 1.0) / cell)), n_side - 1)
+    lo_z = max(int(math.floor((pz - chord + 1.0) / cell)), 0)
+    hi_z = min(int(math.floor((pz + chord + 1.0) / cell)), n_side - 1)
+    r2 = chord * chord
+    a2 = away_chord * away_chord
+    for ix in range(lo_x, hi_x + 1):
+        for iy in range(lo_y, hi_y + 1):
+            col = ix * n_side + iy
+            for pos in range(columns[col], columns[col + 1]):
+                iz = keys[pos] - col * n_side
+                if iz < lo_z:
+                    continue
+                if iz > hi_z:
+                    break
+                for s in range(starts[pos], starts[pos + 1]):
+                    row = stars[s]
+                    if row == skip0 or row == skip1 or row == skip2:
+                        continue
+                    x, y, z = vec[row, 0], vec[row, 1], vec[row, 2]
+                    if (x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2 > r2:
+                        continue
+                    alone = True
+                    for j in range(len(away)):
+                        if (x - away[j, 0]) ** 2 + (y - away[j, 1]) ** 2 + (z - away[j, 2]) ** 2 <= a2:
+                            alone = False
+                            break
+                    if alone:
+                        return True
+    return False
+
+
 def stars_within(grid: SkyGrid, points: FloatArray, chord: float) -> np.ndarray:
     """Mask ``(M,)``: has each point ``(M, 3)`` a star within ``chord``? (Python entry, for
     tests and occasional use; the kernels call :func:`has_star_within` directly.)"""

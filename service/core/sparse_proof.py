@@ -20,12 +20,13 @@ from numba import njit
 from scipy.special import gammaincinv
 
 from .attitude import wahba_svd
-from .camera import project_rows
+from .camera import Camera, project_rows
 from .geometry import cross, pairwise_angles
 from .match import _camera_rows
+from .navdb.reader import NavDatabase
 from .screen import frame_columns, hits_under
-from .skygrid import collect_within
-from .types import FloatArray, IntArray
+from .skygrid import collect_within, has_star_within_away
+from .types import Centroids, FloatArray, IntArray
 from .verify import Verified, Verifier, field_grid, sky_grid, star_vec64
 
 SPARSE_CONFIDENCE = 0.95
@@ -110,9 +111,9 @@ def check_unique_triangle(
         # field check on the few that pass (the same count: ~0.9 us an attitude went to
         # gathering its field)
         box = box[_could_explain(verifier, box, obs_idx) >= explained[0]]
-    elif len(box) and len(obs) == len(obs_idx):
-        # nothing else observed: a box attitude counts only if no other catalogue star lies in
-        # its image, so one such star well inside it rules the attitude out (_star_in_view)
+    elif len(box):
+        # a box attitude counts only if every catalogue star in its image is observed, so one
+        # well inside it and away from every other observed star rules it out (_star_in_view)
         box = box[~_star_in_view(verifier, box, obs_idx)]
     if len(box):
         rs = _sparse_attitudes(obs.vec[obs_idx], stars, box)
@@ -185,12 +186,13 @@ def _explain_kernel(obs_vec: np.ndarray, tri: np.ndarray, cands: np.ndarray, oth
 
 def _star_in_view(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> IntArray:
     """For each catalogue triple ``cands[k]`` matched to the observed rows ``obs_idx`` (under
-    the attitude :func:`_sparse_attitudes` gives it), of a frame with no other observed star:
-    is a catalogue star other than the triple within the circle about the principal point
-    that stays a match radius inside the image? Such a star is one :func:`_field_check`
-    counts as unseen (a pinhole image holds the circle, and it is among the field's nearest
-    stars to the boresight), so a triple marked True cannot count. All False (no test) for a
-    rig or a distorted camera."""
+    the attitude :func:`_sparse_attitudes` gives it): is a catalogue star other than the triple
+    within the circle about the principal point that stays a match radius inside the image,
+    and farther than ``radius_px / f_px`` (angle) from every other observed star? Such a star
+    is one :func:`_field_check` counts as unseen: a pinhole image holds the circle, it is among
+    the field's nearest stars to the boresight, and no observed star is within the match radius
+    of its pixel (a pinhole's pixel distance is at least ``f_px`` times the angle). So a triple
+    marked True cannot count. All False (no test) for a rig or a distorted camera."""
     obs = verifier.obs
     if len(obs.cameras) != 1 or obs.cameras[0].distortion:
         return np.zeros(len(cands), np.bool_)
@@ -201,12 +203,59 @@ def _star_in_view(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> Int
         return np.zeros(len(cands), np.bool_)
     half = math.atan(inner / cam.f_px)
     g = field_grid(verifier.db, math.degrees(half))
-    # the boresight (body: the mounting's third row) as one more "star" to look around
-    vec = np.vstack([obs.vec, np.asarray(obs.mountings[0], dtype=np.float64)[2]])
-    hits = _explain_kernel(vec, np.asarray(obs_idx, dtype=np.int64), np.ascontiguousarray(cands, dtype=np.int64),
-                           np.array([len(obs)], np.int64), 2 * math.sin(half / 2), g.cell, g.n_side, g.keys,
+    others = np.setdiff1d(np.arange(len(obs)), obs_idx)
+    return _in_view_kernel(np.ascontiguousarray(obs.vec[obs_idx], dtype=np.float64),
+                           np.ascontiguousarray(obs.vec[others], dtype=np.float64),
+                           np.ascontiguousarray(cands, dtype=np.int64),
+                           np.ascontiguousarray(np.asarray(obs.mountings[0], dtype=np.float64)[2]),
+                           2 * math.sin(half / 2), 2 * math.sin(r / cam.f_px / 2), g.cell, g.n_side, g.keys,
                            g.starts, g.stars, g.vec, g.columns)
-    return hits > 0
+
+
+@njit(cache=True, nogil=True)
+def _in_view_kernel(tri_vec: np.ndarray, other_vec: np.ndarray, cands: np.ndarray, axis: np.ndarray, chord: float,
+                    away_chord: float, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray,
+                    stars: np.ndarray, star_vec: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Per triple: :func:`_star_in_view` under its TRIAD attitude (``tri_vec`` the matched
+    observed stars, ``other_vec`` the rest, ``axis`` the boresight, body frame)."""
+    out = np.zeros(len(cands), np.bool_)
+    fo = np.empty((3, 3))
+    fc = np.empty((3, 3))
+    frame_columns(tri_vec[0, 0], tri_vec[0, 1], tri_vec[0, 2], tri_vec[1], fo)
+    local = np.empty((len(other_vec) + 1, 3))  # O^T v: the boresight, then the other stars
+    for j in range(len(other_vec) + 1):
+        v = axis if j == 0 else other_vec[j - 1]
+        for i in range(3):
+            local[j, i] = fo[0, i] * v[0] + fo[1, i] * v[1] + fo[2, i] * v[2]
+    away = np.empty((len(other_vec), 3))
+    for k in range(len(cands)):
+        c0, c1, c2 = cands[k, 0], cands[k, 1], cands[k, 2]
+        a = star_vec[c0]
+        frame_columns(a[0], a[1], a[2], star_vec[c1], fc)
+        for j in range(len(other_vec)):  # C l: to ICRS
+            for i in range(3):
+                away[j, i] = fc[i, 0] * local[j + 1, 0] + fc[i, 1] * local[j + 1, 1] + fc[i, 2] * local[j + 1, 2]
+        px = fc[0, 0] * local[0, 0] + fc[0, 1] * local[0, 1] + fc[0, 2] * local[0, 2]
+        py = fc[1, 0] * local[0, 0] + fc[1, 1] * local[0, 1] + fc[1, 2] * local[0, 2]
+        pz = fc[2, 0] * local[0, 0] + fc[2, 1] * local[0, 1] + fc[2, 2] * local[0, 2]
+        out[k] = has_star_within_away(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns,
+                                      c0, c1, c2, away, away_chord)
+    return out
+
+
+def warm_up_screens(db: NavDatabase, camera: Camera, frame: Centroids) -> None:
+    """Compile (or load) the box screens' kernels on ``db``: each screen of ``frame``'s first
+    3 and 4 stars against a few catalogue triples (see ``pipeline.warm_up``)."""
+    from .pipeline import _observation  # (the pipeline imports this module)
+
+    triples = np.arange(6, dtype=np.int64).reshape(2, 3) % max(len(db.stars), 1)
+    for n in (3, 4):
+        obs = _observation([(Centroids(frame.xy[:n], frame.flux[:n]), camera, None)], [np.eye(3)])
+        if len(obs) < 3:
+            continue
+        verifier = Verifier(db, obs, match_radius_px=3.0)
+        _could_explain(verifier, triples, np.arange(3))
+        _star_in_view(verifier, triples, np.arange(3))
 
 
 def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,

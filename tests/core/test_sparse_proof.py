@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from service.core.attitude import quat_to_matrix
 from service.core.navdb import NavDatabase
@@ -112,10 +113,12 @@ def test_could_explain_never_counts_fewer_than_the_field_check(seed000_db: NavDa
     assert passed_random < 0.05 * checked_random  # and the screen leaves few random triples to check
 
 
-def test_a_star_in_view_is_one_the_field_check_counts_unseen(seed000_db: NavDatabase) -> None:
-    """A 3-star frame: ``_star_in_view`` marks a box triple whose attitude puts another catalogue
-    star in the circle a match radius inside the image; the field check must count that triple
-    unseen (so dropping it cannot change the proof), and the screen must drop most triples."""
+@pytest.mark.parametrize("false_stars", [0, 1])
+def test_a_star_in_view_is_one_the_field_check_counts_unseen(seed000_db: NavDatabase, false_stars: int) -> None:
+    """A frame of a triangle (and a false star): ``_star_in_view`` marks a box triple whose
+    attitude puts another catalogue star in the circle a match radius inside the image, away
+    from every other observed star; the field check must count that triple unseen (so dropping
+    it cannot change the proof), and the screen must drop most triples."""
     from service.core.sparse_proof import _sparse_attitudes, _star_in_view
     from service.core.types import Centroids
 
@@ -126,11 +129,14 @@ def test_a_star_in_view_is_one_the_field_check_counts_unseen(seed000_db: NavData
     marked = total = 0
     for frame in frames:
         real = [i for i in np.argsort(-frame.centroids.flux) if frame.hip[i] >= 0 and int(frame.hip[i]) in hip_rows][:3]
-        cents = Centroids(frame.centroids.xy[real], frame.centroids.flux[real])
-        obs = _observation([(cents, SEED000_CAMERA, None)], [np.eye(3)])
+        xy, flux = frame.centroids.xy[real], frame.centroids.flux[real]
+        if false_stars:  # a fainter false star anywhere in the image
+            xy = np.vstack([xy, rng.uniform(0, 1023, (false_stars, 2))])
+            flux = np.append(flux, np.full(false_stars, flux.min() / 2))
+        obs = _observation([(Centroids(xy, flux), SEED000_CAMERA, None)], [np.eye(3)])
         verifier = Verifier(seed000_db, obs, match_radius_px=3.0)
         obs_idx = np.arange(3)
-        true = np.array([hip_rows[int(frame.hip[real[int(i)]])] for i in obs.index])
+        true = np.array([hip_rows[int(frame.hip[real[int(i)]])] for i in obs.index[:3]])
         box = np.concatenate([true[None], rng.integers(0, len(stars), (300, 3))])
         box = box[[len(set(t)) == 3 for t in box.tolist()]]
         in_view = _star_in_view(verifier, box, obs_idx)

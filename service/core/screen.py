@@ -95,31 +95,21 @@ def _screen(obs_vec: np.ndarray, obs_tris: np.ndarray, cands: np.ndarray, others
         if (h_obs > 0) != (h_cat > 0):
             hits[k] = -1
             continue
-        hits[k] = hits_under(fo, fc, obs_vec, others, o0, o1, o2, chord, cell, n_side, keys, starts, stars,
-                             star_vec, columns, c0, c1, c2)
+        # v_icrs = C O^T v_obs
+        count = 0
+        for m in range(len(others)):
+            row = others[m]
+            if row == o0 or row == o1 or row == o2:
+                continue
+            v = obs_vec[row]
+            l0 = fo[0, 0] * v[0] + fo[1, 0] * v[1] + fo[2, 0] * v[2]
+            l1 = fo[0, 1] * v[0] + fo[1, 1] * v[1] + fo[2, 1] * v[2]
+            l2 = fo[0, 2] * v[0] + fo[1, 2] * v[1] + fo[2, 2] * v[2]
+            px = fc[0, 0] * l0 + fc[0, 1] * l1 + fc[0, 2] * l2
+            py = fc[1, 0] * l0 + fc[1, 1] * l1 + fc[1, 2] * l2
+            pz = fc[2, 0] * l0 + fc[2, 1] * l1 + fc[2, 2] * l2
+            if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, c0, c1, c2):
+                count += 1
+        hits[k] = count
     return hits
-
-
-@njit(cache=True, nogil=True, inline="always")
-def hits_under(fo: np.ndarray, fc: np.ndarray, obs_vec: np.ndarray, others: np.ndarray, o0: int, o1: int, o2: int,
-               chord: float, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray, stars: np.ndarray,
-               star_vec: np.ndarray, columns: np.ndarray, c0: int, c1: int, c2: int) -> int:
-    """How many rows ``others`` of ``obs_vec`` (other than ``o0..o2``) land within ``chord`` of a
-    catalogue star other than ``c0..c2`` under the attitude of the frames ``fo`` (observed) and
-    ``fc`` (catalogue): ``v_icrs = C O^T v_obs``."""
-    count = 0
-    for m in range(len(others)):
-        row = others[m]
-        if row == o0 or row == o1 or row == o2:
-            continue
-        v = obs_vec[row]
-        l0 = fo[0, 0] * v[0] + fo[1, 0] * v[1] + fo[2, 0] * v[2]
-        l1 = fo[0, 1] * v[0] + fo[1, 1] * v[1] + fo[2, 1] * v[2]
-        l2 = fo[0, 2] * v[0] + fo[1, 2] * v[1] + fo[2, 2] * v[2]
-        px = fc[0, 0] * l0 + fc[0, 1] * l1 + fc[0, 2] * l2
-        py = fc[1, 0] * l0 + fc[1, 1] * l1 + fc[1, 2] * l2
-        pz = fc[2, 0] * l0 + fc[2, 1] * l1 + fc[2, 2] * l2
-        if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, c0, c1, c2):
-            count += 1
-    return count
 

@@ -75,38 +75,17 @@ def build_sky_grid(vec: FloatArray, cell_rad: float = DEFAULT_CELL_RAD) -> SkyGr
     return SkyGrid(float(cell_rad), n_side, keys.astype(np.int64), starts, order.astype(np.int64), vec, columns)
 
 
+_NO_POINTS = np.zeros((0, 3))
+
+
 @njit(cache=True, nogil=True)
 def has_star_within(px: float, py: float, pz: float, chord: float, cell: float, n_side: int,
                     keys: np.ndarray, starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
                     columns: np.ndarray, skip0: int, skip1: int, skip2: int) -> bool:
     """True if some star other than rows ``skip0..2`` lies within ``chord`` (unit-vector
     distance) of the point ``(px, py, pz)``."""
-    lo_x = max(int(math.floor((px - chord + 1.0) / cell)), 0)
-    hi_x = min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1)
-    lo_y = max(int(math.floor((py - chord + 1.0) / cell)), 0)
-    hi_y = min(int(math.floor((py + chord + 1.0) / cell)), n_side - 1)
-    lo_z = max(int(math.floor((pz - chord + 1.0) / cell)), 0)
-    hi_z = min(int(math.floor((pz + chord + 1.0) / cell)), n_side - 1)
-    r2 = chord * chord
-    for ix in range(lo_x, hi_x + 1):
-        for iy in range(lo_y, hi_y + 1):
-            col = ix * n_side + iy
-            for pos in range(columns[col], columns[col + 1]):
-                iz = keys[pos] - col * n_side
-                if iz < lo_z:
-                    continue
-                if iz > hi_z:
-                    break
-                for s in range(starts[pos], starts[pos + 1]):
-                    row = stars[s]
-                    if row == skip0 or row == skip1 or row == skip2:
-                        continue
-                    dx = vec[row, 0] - px
-                    dy = vec[row, 1] - py
-                    dz = vec[row, 2] - pz
-                    if dx * dx + dy * dy + dz * dz <= r2:
-                        return True
-    return False
+    return _star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, vec, columns, skip0, skip1, skip2,
+                        _NO_POINTS, 0.0)
 
 
 @njit(cache=True, nogil=True)
@@ -116,6 +95,15 @@ def has_star_within_away(px: float, py: float, pz: float, chord: float, cell: fl
                          away_chord: float) -> bool:
     """:func:`has_star_within`, counting only stars farther than ``away_chord`` from every
     point of ``away`` ``(M, 3)``."""
+    return _star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, vec, columns, skip0, skip1, skip2,
+                        away, away_chord)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _star_within(px: float, py: float, pz: float, chord: float, cell: float, n_side: int, keys: np.ndarray,
+                 starts: np.ndarray, stars: np.ndarray, vec: np.ndarray, columns: np.ndarray, skip0: int,
+                 skip1: int, skip2: int, away: np.ndarray, away_chord: float) -> bool:
+    """The scan of both: every cell the query ball overlaps, the first star that qualifies."""
     lo_x = max(int(math.floor((px - chord + 1.0) / cell)), 0)
     hi_x = min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1)
     lo_y = max(int(math.floor((py - chord + 1.0) / cell)), 0)
@@ -137,12 +125,17 @@ def has_star_within_away(px: float, py: float, pz: float, chord: float, cell: fl
                     row = stars[s]
                     if row == skip0 or row == skip1 or row == skip2:
                         continue
-                    x, y, z = vec[row, 0], vec[row, 1], vec[row, 2]
-                    if (x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2 > r2:
+                    dx = vec[row, 0] - px
+                    dy = vec[row, 1] - py
+                    dz = vec[row, 2] - pz
+                    if dx * dx + dy * dy + dz * dz > r2:
                         continue
                     alone = True
                     for j in range(len(away)):
-                        if (x - away[j, 0]) ** 2 + (y - away[j, 1]) ** 2 + (z - away[j, 2]) ** 2 <= a2:
+                        ex = vec[row, 0] - away[j, 0]
+                        ey = vec[row, 1] - away[j, 1]
+                        ez = vec[row, 2] - away[j, 2]
+                        if ex * ex + ey * ey + ez * ez <= a2:
                             alone = False
                             break
                     if alone:

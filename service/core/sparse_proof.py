@@ -24,7 +24,7 @@ from .camera import Camera, project_rows
 from .geometry import cross, pairwise_angles
 from .match import _camera_rows
 from .navdb.reader import NavDatabase
-from .screen import frame_columns, hits_under
+from .screen import frame_columns
 from .skygrid import collect_within, has_star_within_away
 from .types import Centroids, FloatArray, IntArray
 from .verify import Verified, Verifier, field_grid, sky_grid, star_vec64
@@ -155,32 +155,48 @@ def _could_explain(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> In
     stars at the match radius in pixels among fewer catalogue stars, so a test on it never drops
     a triple that the field check keeps."""
     obs = verifier.obs
-    others = np.setdiff1d(np.arange(len(obs)), obs_idx).astype(np.int64)
+    others = np.setdiff1d(np.arange(len(obs)), obs_idx)
     g = sky_grid(verifier.db)
     chord = EXPLAIN_SLACK * verifier.match_radius_px * obs.pixel_scale_rad
-    return _explain_kernel(np.ascontiguousarray(obs.vec, dtype=np.float64), np.asarray(obs_idx, dtype=np.int64),
-                           np.ascontiguousarray(cands, dtype=np.int64), others, float(chord), g.cell, g.n_side,
-                           g.keys, g.starts, g.stars, g.vec, g.columns)
+    return _box_kernel(np.ascontiguousarray(obs.vec[obs_idx], dtype=np.float64),
+                       np.ascontiguousarray(obs.vec[others], dtype=np.float64), _NO_POINTS,
+                       np.ascontiguousarray(cands, dtype=np.int64), float(chord), 0.0, g.cell, g.n_side, g.keys,
+                       g.starts, g.stars, g.vec, g.columns)
+
+
+_NO_POINTS = np.zeros((0, 3))
 
 
 @njit(cache=True, nogil=True)
-def _explain_kernel(obs_vec: np.ndarray, tri: np.ndarray, cands: np.ndarray, others: np.ndarray, chord: float,
-                    cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray, stars: np.ndarray,
-                    star_vec: np.ndarray, columns: np.ndarray) -> np.ndarray:
-    """Per triple ``cands[k]``: how many rows ``others`` of ``obs_vec`` (body) land within
-    ``chord`` of a catalogue star other than the triple under the TRIAD attitude of the
-    observed rows ``tri`` onto it (the frames of :func:`_sparse_attitudes`)."""
+def _box_kernel(tri_vec: np.ndarray, points: np.ndarray, away: np.ndarray, cands: np.ndarray, chord: float,
+                away_chord: float, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray,
+                stars: np.ndarray, star_vec: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Per triple ``cands[k]``: how many of ``points`` (body) have a catalogue star other than
+    the triple within ``chord`` and farther than ``away_chord`` from every point of ``away``
+    (body), under the TRIAD attitude of the observed ``tri_vec`` onto the triple (the frames of
+    :func:`_sparse_attitudes`: body -> ICRS is ``C O^T``)."""
     out = np.zeros(len(cands), np.int64)
     fo = np.empty((3, 3))
     fc = np.empty((3, 3))
-    a = obs_vec[tri[0]]
-    frame_columns(a[0], a[1], a[2], obs_vec[tri[1]], fo)
+    frame_columns(tri_vec[0, 0], tri_vec[0, 1], tri_vec[0, 2], tri_vec[1], fo)
+    n_p, n_a = len(points), len(away)
+    local = np.empty((n_p + n_a, 3))  # O^T v of every point, then of every away point
+    for j in range(n_p + n_a):
+        v = points[j] if j < n_p else away[j - n_p]
+        for i in range(3):
+            local[j, i] = fo[0, i] * v[0] + fo[1, i] * v[1] + fo[2, i] * v[2]
+    icrs = np.empty((n_p + n_a, 3))
     for k in range(len(cands)):
         c0, c1, c2 = cands[k, 0], cands[k, 1], cands[k, 2]
         a = star_vec[c0]
         frame_columns(a[0], a[1], a[2], star_vec[c1], fc)
-        out[k] = hits_under(fo, fc, obs_vec, others, -1, -1, -1, chord, cell, n_side, keys, starts, stars,
-                            star_vec, columns, c0, c1, c2)
+        for j in range(n_p + n_a):
+            for i in range(3):
+                icrs[j, i] = fc[i, 0] * local[j, 0] + fc[i, 1] * local[j, 1] + fc[i, 2] * local[j, 2]
+        for j in range(n_p):
+            if has_star_within_away(icrs[j, 0], icrs[j, 1], icrs[j, 2], chord, cell, n_side, keys, starts, stars,
+                                    star_vec, columns, c0, c1, c2, icrs[n_p:], away_chord):
+                out[k] += 1
     return out
 
 
@@ -204,43 +220,12 @@ def _star_in_view(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> Int
     half = math.atan(inner / cam.f_px)
     g = field_grid(verifier.db, math.degrees(half))
     others = np.setdiff1d(np.arange(len(obs)), obs_idx)
-    return _in_view_kernel(np.ascontiguousarray(obs.vec[obs_idx], dtype=np.float64),
-                           np.ascontiguousarray(obs.vec[others], dtype=np.float64),
-                           np.ascontiguousarray(cands, dtype=np.int64),
-                           np.ascontiguousarray(np.asarray(obs.mountings[0], dtype=np.float64)[2]),
-                           2 * math.sin(half / 2), 2 * math.sin(r / cam.f_px / 2), g.cell, g.n_side, g.keys,
-                           g.starts, g.stars, g.vec, g.columns)
-
-
-@njit(cache=True, nogil=True)
-def _in_view_kernel(tri_vec: np.ndarray, other_vec: np.ndarray, cands: np.ndarray, axis: np.ndarray, chord: float,
-                    away_chord: float, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray,
-                    stars: np.ndarray, star_vec: np.ndarray, columns: np.ndarray) -> np.ndarray:
-    """Per triple: :func:`_star_in_view` under its TRIAD attitude (``tri_vec`` the matched
-    observed stars, ``other_vec`` the rest, ``axis`` the boresight, body frame)."""
-    out = np.zeros(len(cands), np.bool_)
-    fo = np.empty((3, 3))
-    fc = np.empty((3, 3))
-    frame_columns(tri_vec[0, 0], tri_vec[0, 1], tri_vec[0, 2], tri_vec[1], fo)
-    local = np.empty((len(other_vec) + 1, 3))  # O^T v: the boresight, then the other stars
-    for j in range(len(other_vec) + 1):
-        v = axis if j == 0 else other_vec[j - 1]
-        for i in range(3):
-            local[j, i] = fo[0, i] * v[0] + fo[1, i] * v[1] + fo[2, i] * v[2]
-    away = np.empty((len(other_vec), 3))
-    for k in range(len(cands)):
-        c0, c1, c2 = cands[k, 0], cands[k, 1], cands[k, 2]
-        a = star_vec[c0]
-        frame_columns(a[0], a[1], a[2], star_vec[c1], fc)
-        for j in range(len(other_vec)):  # C l: to ICRS
-            for i in range(3):
-                away[j, i] = fc[i, 0] * local[j + 1, 0] + fc[i, 1] * local[j + 1, 1] + fc[i, 2] * local[j + 1, 2]
-        px = fc[0, 0] * local[0, 0] + fc[0, 1] * local[0, 1] + fc[0, 2] * local[0, 2]
-        py = fc[1, 0] * local[0, 0] + fc[1, 1] * local[0, 1] + fc[1, 2] * local[0, 2]
-        pz = fc[2, 0] * local[0, 0] + fc[2, 1] * local[0, 1] + fc[2, 2] * local[0, 2]
-        out[k] = has_star_within_away(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns,
-                                      c0, c1, c2, away, away_chord)
-    return out
+    boresight = np.ascontiguousarray(np.asarray(obs.mountings[0], dtype=np.float64)[2:3])  # body
+    return _box_kernel(np.ascontiguousarray(obs.vec[obs_idx], dtype=np.float64), boresight,
+                       np.ascontiguousarray(obs.vec[others], dtype=np.float64),
+                       np.ascontiguousarray(cands, dtype=np.int64), 2 * math.sin(half / 2),
+                       2 * math.sin(r / cam.f_px / 2), g.cell, g.n_side, g.keys, g.starts, g.stars, g.vec,
+                       g.columns) > 0
 
 
 def warm_up_screens(db: NavDatabase, camera: Camera, frame: Centroids) -> None:

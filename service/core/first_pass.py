@@ -7,7 +7,8 @@ Python between them run in one (:func:`first_pass_kernel`):
 1. the ``quad`` search on the plan's first member (:func:`~.methods.quad_kernel.quad_search`:
    patterns, lookup, screen, pairing, near-miss test, coincidence bound);
 2. when the plan's deepest member is another one, the answer re-verified against its deeper
-   star table (what ``pipeline._refine`` does with :func:`~.answer.recheck`);
+   star table (what ``pipeline._refine`` does with :func:`~.answer.recheck`), unless no
+   unpaired star lies near one of its stars (:func:`~.methods.quad_kernel.could_pair_more`);
 3. the answer's checks: close doubles named, implausible pairs dropped
    (:func:`~.answer.answer_kernel`);
 4. the final fit: Wahba refit if the pairs changed, residuals, RMS and the pooled 1-sigma
@@ -34,7 +35,7 @@ from .attitude import PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
 from .hidden import hidden_neighbours
 from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
-from .methods.quad_kernel import STATUS_FOUND, quad_search, recheck_pairs
+from .methods.quad_kernel import RECHECK_REACH, STATUS_FOUND, could_pair_more, quad_search, recheck_pairs
 from .navdb.reader import NavDatabase
 from .solution import answer_columns, star_hips
 from .verify import NEAR_MARGIN_DEG, Observation, Verifier, field_grid, star_vec64
@@ -243,7 +244,9 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
     used_deep = False
     vec, cell, side, keys, starts, stars, columns, mags, hid, hid_lim = star_vec, a_cell, a_side, a_keys, a_starts, \
         a_stars, a_columns, mag, hidden, hidden_lim
-    if has_deep:  # pipeline._refine: the stars the deeper member holds are the hypothesis
+    if has_deep and could_pair_more(obs_vec, m_obs, r, RECHECK_REACH * radius_px * pixel_scale, d_cell, d_side,
+                                     d_keys, d_starts, d_stars, d_vec, d_columns):
+        # pipeline._refine: the stars the deeper member holds are the hypothesis
         n_known = 0
         for c in m_cat:
             if deep_rows[c] >= 0:

@@ -26,6 +26,7 @@ from .hidden import hidden_kernel, hidden_neighbours
 from .match import CROWD
 from .methods import SolveContext, get_matcher, get_method, resolve
 from .methods.quad import QUERY_STARS
+from .methods.quad_kernel import RECHECK_REACH, could_pair_more
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted, too_bright
 from .refusal import no_solution, refusal
@@ -33,7 +34,7 @@ from .residuals import distant_pairs
 from .solution import answer, solution_of
 from .trimmed import trimmed_basin
 from .types import Centroids, Solution, SolveStatus
-from .verify import Observation, Verified, Verifier, star_tree
+from .verify import Observation, Verified, Verifier, field_grid, star_tree, star_vec64
 
 Quaternion = Sequence[float]
 
@@ -331,6 +332,8 @@ def _refine(
     if known.sum() < 3:
         return None
     radius = options.match_radius_px or max(2.5, 3.0 * sigma)
+    if len(obs.cameras) == 1 and not _could_pair_more(obs, deeper, found, radius):
+        return None
     compiled = recheck(obs, deeper, found.obs[known], rows[known], found.n_trials, radius)  # one camera
     if compiled is None:
         verifier = Verifier(deeper, obs, match_radius_px=radius, max_false_prob=options.max_false_prob,
@@ -343,6 +346,16 @@ def _refine(
     if refined is None or len(refined.obs) <= len(found.obs):
         return None
     return refined
+
+
+def _could_pair_more(obs: Observation, deeper: NavDatabase, found: Verified, radius_px: float) -> bool:
+    """False if no observed star outside ``found`` lies near a star of ``deeper`` under its
+    attitude, so that re-verifying there cannot name more stars (one camera; see
+    :func:`~.methods.quad_kernel.could_pair_more`)."""
+    g = field_grid(deeper)
+    chord = RECHECK_REACH * radius_px * obs.pixel_scale_rad
+    return bool(could_pair_more(obs.vec, found.obs.astype(np.int64), np.ascontiguousarray(found.matrix), chord,
+                                *g.kernel_args()[:5], star_vec64(deeper), g.columns))
 
 
 def _identify(

@@ -21,7 +21,7 @@ from ..conftest import ROOT
 
 KERNELS = {
     "service.core.first_pass": ["first_pass_kernel"],
-    "service.core.methods.quad_kernel": ["quad_search", "verify_pairs", "recheck_pairs", "_verify"],
+    "service.core.methods.quad_kernel": ["quad_search", "verify_pairs", "recheck_pairs", "_verify", "could_pair_more"],
     "service.core.match": ["_refine", "_match_rig", "_wahba_pairs"],
     "service.core.answer": ["answer_kernel"],
 }

@@ -6,11 +6,13 @@ import numpy as np
 import pytest
 
 from service.core import pipeline
-from service.core.first_pass import first_pass
+from service.core.answer import recheck
+from service.core.first_pass import deeper_arrays, first_pass
 from service.core.pipeline import SolveOptions, _observation, _search_plan, solve
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, simulate_frames
 from service.core.types import Centroids
+from service.core.verify import Verified
 
 
 def _both(monkeypatch: pytest.MonkeyPatch, centroids: Centroids, camera, db, options: SolveOptions):
@@ -60,3 +62,32 @@ def test_a_frame_the_first_pass_cannot_prove_goes_on_without_searching_again(mon
         assert not fused.solved and not general.solved
         assert fused.methods_tried == general.methods_tried
         assert fused.methods_tried[0] == "quad" and fused.methods_tried.count("quad") == general.methods_tried.count("quad")
+
+
+def test_the_deeper_recheck_is_skipped_only_where_it_could_not_name_more_stars(default_set_db) -> None:
+    # seed 000: the first member (V <= 6.5) is re-verified against the deepest (V <= 8); the
+    # screen skips that recheck when no unpaired star lies near a deeper star
+    p = PRESETS["seed000"]
+    frames = simulate_frames(p.camera, 80, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0, false_stars=2),
+                             rng=32)
+    plan, deepest = _search_plan(default_set_db, [p.camera], "auto", 1.0)
+    member = plan[0][0]
+    assert member is not deepest
+    radius = 3.0
+    skipped = named_more = 0
+    for frame in frames:
+        obs = _observation([(frame.centroids, p.camera, None)], [np.eye(3)])
+        fp = first_pass(obs, member, member, 1.0, None, 1e-5)  # the member's own answer
+        if not fp.solved:
+            continue
+        found = Verified(fp.obs_rows, fp.cat_rows, fp.matrix, fp.false_prob, fp.trials)
+        rows = deeper_arrays(member, deepest).rows[found.cat]
+        known = rows >= 0
+        ok, m_obs, _, _, _ = recheck(obs, deepest, found.obs[known], rows[known], found.n_trials, radius)
+        more = bool(ok) and len(m_obs) > len(found.obs)
+        if pipeline._could_pair_more(obs, deepest, found, radius):
+            named_more += more
+        else:
+            skipped += 1
+            assert not more
+    assert skipped >= 10 and named_more >= 3

@@ -359,6 +359,36 @@ def recheck_pairs(obs_vec, obs_xy, star_vec, obs_idx, cat_idx, g_cell, g_side, g
                         cams, dist, rows, row_off, radius_px, 1.5 * radius_px * pixel_scale, trials)
 
 
+RECHECK_REACH = SETTLE[-1] + 1.0
+"""Match radii around an unpaired observed star within which another member's star must lie
+for :func:`recheck_pairs` to pair more stars (the near-miss test's widest radius, and one more
+for the refit's move)."""
+
+
+@njit(cache=True, nogil=True)
+def could_pair_more(obs_vec, paired, r, chord, cell, n_side, keys, starts, stars, star_vec, columns):
+    """True if some observed star not in ``paired`` lies within ``chord`` (unit-vector
+    distance) of a star of ``star_vec`` under ``r`` (ICRS -> body).
+
+    An answer re-verified against another member (:func:`recheck_pairs`) can name more stars
+    only through such a star: with ``chord`` at :data:`RECHECK_REACH` match radii, a frame
+    whose every unpaired star is farther from that member's stars skips the recheck (~15 us).
+    """
+    taken = np.zeros(len(obs_vec), np.bool_)
+    for i in paired:
+        taken[i] = True
+    for m in range(len(obs_vec)):
+        if taken[m]:
+            continue
+        v = obs_vec[m]
+        px = r[0, 0] * v[0] + r[1, 0] * v[1] + r[2, 0] * v[2]
+        py = r[0, 1] * v[0] + r[1, 1] * v[1] + r[2, 1] * v[2]
+        pz = r[0, 2] * v[0] + r[1, 2] * v[1] + r[2, 2] * v[2]
+        if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, -1, -1, -1):
+            return True
+    return False
+
+
 @njit(cache=True, nogil=True)
 def _field(r, mount, state, chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec, g_columns, buf):
     """The catalogue rows near the boresight under ``r`` (a view of ``buf``), reusing the last

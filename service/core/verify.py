@@ -34,6 +34,7 @@ from .match import RigArrays, match_rig, refine, rig_arrays
 from .navdb.reader import NavDatabase
 from .screen import screen_hits
 from .skygrid import SkyGrid, build_sky_grid
+from .skymask import SkyMask, build_sky_mask
 from .types import FloatArray, IntArray
 
 
@@ -243,7 +244,7 @@ class Verifier:
         catalogue star under the candidate's attitude; -1 for a mirror image (compiled:
         :func:`~service.core.screen.screen_hits`)."""
         radius = 1.5 * self.match_radius_px * self.obs.pixel_scale_rad
-        return screen_hits(self.obs.vec, obs_tris, cands, others, sky_grid(self.db), radius)
+        return screen_hits(self.obs.vec, obs_tris, cands, others, sky_grid(self.db), radius, sky_mask(self.db, radius))
 
     def check(self, obs_idx: IntArray, cat_idx: IntArray, *, n_trials: int | None = None) -> Verified | None:
         """Verify a hypothesis pairing ``obs_idx`` rows with catalogue rows ``cat_idx``.
@@ -471,6 +472,28 @@ def sky_grid(db: NavDatabase) -> SkyGrid:
     if "grid" not in cache:
         cache["grid"] = build_sky_grid(np.asarray(db.stars.vec))
     return cache["grid"]
+
+
+MASK_REACH_STEP = 2.0 ** 0.25
+"""Sky masks are built for reaches on this geometric ladder (the first at or above the screen's
+chord), so the few chords a database meets share a handful of masks."""
+MASKS_PER_DATABASE = 16
+
+
+def sky_mask(db: NavDatabase, chord: float) -> SkyMask:
+    """The database's :class:`~service.core.skymask.SkyMask` for screens of ``chord`` (unit-vector
+    distance) or less, built once per opened database and reach (~0.5 ms, 197 kB)."""
+    cache = db.__dict__.setdefault("_cache", {})
+    reach = MASK_REACH_STEP ** math.ceil(math.log(max(chord, 1e-12), MASK_REACH_STEP))
+    key = ("sky_mask", reach)
+    mask = cache.get(key)
+    if mask is None:
+        masks = [k for k in cache if isinstance(k, tuple) and k[0] == "sky_mask"]
+        if len(masks) >= MASKS_PER_DATABASE:
+            for k in masks:
+                del cache[k]
+        mask = cache[key] = build_sky_mask(np.asarray(db.stars.vec), reach * (1.0 + 1e-9))
+    return mask
 
 
 FIELD_CELL_DEG = (1.0, 2.0, 4.0, 8.0)

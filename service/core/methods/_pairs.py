@@ -8,6 +8,7 @@ uses the rows within its own (:meth:`SharedPairs.rows`).
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -179,9 +180,107 @@ def _adjacency(pairs: np.ndarray, s: int, e: int, n_stars: int) -> tuple[np.ndar
     return start, adj
 
 
-@njit(cache=True, nogil=True)
+LINKED_JOIN_MAX_ROWS = 3000
+"""Windows of at most this many rows in all are joined through linked lists
+(:func:`join_windows_linked`), larger ones by counting sort (:func:`join_windows_counting`).
+The counting sort sweeps two arrays of the catalogue's size, ~40 us on 24,674 stars, whatever
+the windows; the lists cost per row, but their random reads leave the cache as the windows
+grow: 3 x 800 rows 57 -> 25 us, 3 x 1,200 59 -> 40, 3 x 1,600 67 -> 60, 3 x 2,400 81 -> 150
+(narrow member, /work/s14/join_cmp.py)."""
+_HEADS = threading.local()
+
+
 def join_windows(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_ik: int, s_jk: int, e_jk: int,
                  n_stars: int) -> np.ndarray:
+    """:func:`join_triangles` of three windows of the pair table (rows ``[s, e)`` of ``pairs``,
+    each taken in both orientations), in its order: triples ``(a, b, c)`` with ``a-b`` in the
+    first window, ``a-c`` in the second and ``b-c`` in the third (see :func:`join_windows_counting`
+    for the order), by whichever of the two compiled joins is faster for the windows' size."""
+    if (e_ij - s_ij) + (e_ik - s_ik) + (e_jk - s_jk) > LINKED_JOIN_MAX_ROWS:
+        return join_windows_counting(pairs, s_ij, e_ij, s_ik, e_ik, s_jk, e_jk, n_stars)
+    heads = getattr(_HEADS, "arrays", None)
+    if heads is None or len(heads[0]) < n_stars:  # per thread: the kernel uses them as scratch
+        heads = _HEADS.arrays = (np.full(n_stars, -1, np.int64), np.full(n_stars, -1, np.int64))
+    return join_windows_linked(pairs, s_ij, e_ij, s_ik, e_ik, s_jk, e_jk, heads[0], heads[1])
+
+
+@njit(cache=True, nogil=True)
+def _link(pairs: np.ndarray, s: int, e: int, head: np.ndarray, nxt: np.ndarray, other: np.ndarray) -> None:
+    """Rows ``[s, e)`` of ``pairs`` in both orientations as lists by first star: directed entry
+    ``q = o * (e - s) + (r - s)`` (``o`` = 0 forward, 1 reversed) follows ``head[a]`` and
+    ``nxt``, each star's list in entry order; ``other[q]`` is the entry's second star."""
+    w = e - s
+    for o in range(1, -1, -1):
+        for r in range(e - 1, s - 1, -1):
+            a = pairs[r, o]
+            q = o * w + (r - s)
+            nxt[q] = head[a]
+            other[q] = pairs[r, 1 - o]
+            head[a] = q
+
+
+@njit(cache=True, nogil=True)
+def _unlink(pairs: np.ndarray, s: int, e: int, head: np.ndarray) -> None:
+    """``head`` back to all -1 after :func:`_link` of the same rows."""
+    for r in range(s, e):
+        head[pairs[r, 0]] = -1
+        head[pairs[r, 1]] = -1
+
+
+@njit(cache=True, nogil=True)
+def join_windows_linked(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_ik: int, s_jk: int, e_jk: int,
+                        head_ac: np.ndarray, head_bc: np.ndarray) -> np.ndarray:
+    """:func:`join_windows_counting`'s triples, in its order, through linked lists: work per row
+    of the windows, none per catalogue star. ``head_ac`` and ``head_bc`` (one entry per star)
+    must hold -1 and are left so."""
+    w_ab, w_ac, w_bc = e_ij - s_ij, e_ik - s_ik, e_jk - s_jk
+    nxt_ac = np.empty(2 * w_ac, np.int64)
+    nxt_bc = np.empty(2 * w_bc, np.int64)
+    c_ac = np.empty(2 * w_ac, np.int64)
+    c_bc = np.empty(2 * w_bc, np.int64)
+    _link(pairs, s_ik, e_ik, head_ac, nxt_ac, c_ac)
+    _link(pairs, s_jk, e_jk, head_bc, nxt_bc, c_bc)
+    out = np.empty((16, 3), np.int64)
+    key = np.empty((16, 2), np.int64)  # the a-b entry and the a-c entry of each triple
+    n = 0
+    for o in range(2):
+        for r in range(s_ij, e_ij):
+            a, b = pairs[r, o], pairs[r, 1 - o]
+            qa, hb = head_ac[a], head_bc[b]
+            if qa < 0 or hb < 0:
+                continue
+            while qa >= 0:
+                c = c_ac[qa]
+                if c != b:
+                    t = hb
+                    while t >= 0:
+                        if c_bc[t] == c:
+                            if n == len(out):
+                                grown, grown_key = np.empty((2 * n, 3), np.int64), np.empty((2 * n, 2), np.int64)
+                                grown[:n], grown_key[:n] = out, key
+                                out, key = grown, grown_key
+                            out[n, 0], out[n, 1], out[n, 2] = a, b, c
+                            key[n, 0], key[n, 1] = o * w_ab + (r - s_ij), qa
+                            n += 1
+                            break
+                        t = nxt_bc[t]
+                qa = nxt_ac[qa]
+    _unlink(pairs, s_ik, e_ik, head_ac)
+    _unlink(pairs, s_jk, e_jk, head_bc)
+    order = np.arange(n)
+    for i in range(1, n):  # insertion sort by (a, a-b entry, a-c entry): a handful of triples
+        x = order[i]
+        j = i - 1
+        while j >= 0 and (out[order[j], 0], key[order[j], 0], key[order[j], 1]) > (out[x, 0], key[x, 0], key[x, 1]):
+            order[j + 1] = order[j]
+            j -= 1
+        order[j + 1] = x
+    return out[order]
+
+
+@njit(cache=True, nogil=True)
+def join_windows_counting(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_ik: int, s_jk: int, e_jk: int,
+                          n_stars: int) -> np.ndarray:
     """:func:`join_triangles` of three windows of the pair table (rows ``[s, e)`` of ``pairs``,
     each taken in both orientations), compiled and without sorting: each window as an adjacency
     list by star (a counting sort, stable), and ``c`` kept where it is a neighbour of both ``a``

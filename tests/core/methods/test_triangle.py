@@ -99,9 +99,16 @@ def test_classic_brightness_order_solves_too(db: NavDatabase) -> None:
             db.__dict__["_matchers"]["triangle"] = saved
 
 
-def test_compiled_join_gives_the_vectorised_join_in_its_order(db: NavDatabase) -> None:
+def test_compiled_joins_give_the_vectorised_join_in_its_order(db: NavDatabase) -> None:
     # the windows of the density box (wide: tens of thousands of pairs) and of a query
-    from service.core.methods._pairs import edge_keys, join_triangles, join_windows
+    from service.core.methods._pairs import (
+        LINKED_JOIN_MAX_ROWS,
+        edge_keys,
+        join_triangles,
+        join_windows,
+        join_windows_counting,
+        join_windows_linked,
+    )
 
     m = get_matcher(db, "triangle")
     pairs, angles = np.asarray(m.pairs), np.asarray(m.angles)
@@ -112,15 +119,20 @@ def test_compiled_join_gives_the_vectorised_join_in_its_order(db: NavDatabase) -
         return both[np.argsort(both[:, 0], kind="stable")]
 
     rng = np.random.default_rng(5)
-    compared = 0
-    for width in (2e-5, 2e-4, 2e-3):
+    compared = small = 0
+    for width in (2e-6, 2e-5, 2e-4, 2e-3):
         for _ in range(6):
             sides = rng.uniform(0.01, m.max_angle * 0.9, 3)
             s = np.searchsorted(angles, sides - width)
             e = np.searchsorted(angles, sides + width, side="right")
             want = join_triangles(edges(s[0], e[0]), edges(s[1], e[1]), edge_keys(edges(s[2], e[2]), m.n_stars),
                                   m.n_stars)
-            got = join_windows(pairs, int(s[0]), int(e[0]), int(s[1]), int(e[1]), int(s[2]), int(e[2]), m.n_stars)
-            np.testing.assert_array_equal(got, want.reshape(-1, 3))
+            rows = (pairs, int(s[0]), int(e[0]), int(s[1]), int(e[1]), int(s[2]), int(e[2]))
+            heads = np.full(m.n_stars, -1, np.int64), np.full(m.n_stars, -1, np.int64)
+            for got in (join_windows(*rows, m.n_stars), join_windows_counting(*rows, m.n_stars),
+                        join_windows_linked(*rows, *heads)):
+                np.testing.assert_array_equal(got, want.reshape(-1, 3))
+            assert (heads[0] == -1).all() and (heads[1] == -1).all()  # left as found
             compared += len(want)
-    assert compared > 100
+            small += int((e - s).sum()) <= LINKED_JOIN_MAX_ROWS
+    assert compared > 100 and small >= 6

@@ -186,7 +186,7 @@ LINKED_JOIN_MAX_ROWS = 3000
 The counting sort sweeps two arrays of the catalogue's size, ~40 us on 24,674 stars, whatever
 the windows; the lists cost per row, but their random reads leave the cache as the windows
 grow: 3 x 800 rows 57 -> 25 us, 3 x 1,200 59 -> 40, 3 x 1,600 67 -> 60, 3 x 2,400 81 -> 150
-(narrow member, /work/s14/join_cmp.py)."""
+(narrow member; a one-off timing loop over windows of the pair table)."""
 _HEADS = threading.local()
 
 

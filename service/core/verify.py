@@ -316,12 +316,15 @@ class Verifier:
         redone at the match radius; that basin replaces the answer if it pairs more stars (and
         is tested at the next factor). In a dense real frame (hundreds of detections, many not
         in the catalogue) the wide pairing also grows by chance; its refit then pairs fewer
-        stars and the answer stays. Returns the new basin ``(obs, cat, p, r)``, or None when
-        the attitude is settled as it was.
+        stars and the answer stays. A frame with no more than ``max(3, n_pairs / 3)`` stars
+        left unpaired cannot grow so, and is settled without pairing. Returns the new basin
+        ``(obs, cat, p, r)``, or None when the attitude is settled as it was.
         """
         k = self.obs.kernel_arrays
         moved: tuple[IntArray, IntArray, float, FloatArray] | None = None
         for factor in SETTLE_FACTORS:
+            if len(self.obs) <= n_pairs + max(3, n_pairs // 3):
+                break  # the wide pairing cannot grow enough: too few stars are left unpaired
             near, near_off = self._near(r)
             w_obs, w_cat, _ = match_rig(r, self.obs.xy, self.db.stars.vec, near, near_off, k,
                                         factor * self.match_radius_px, crowd=1.0)

@@ -315,6 +315,8 @@ def verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g
         return False, empty, empty, r, 1.0
     n_pairs = len(m_obs)
     for f in range(len(SETTLE)):  # the verifier's near-miss test (Verifier._settle)
+        if n_obs <= n_pairs + max(3, n_pairs // 3):
+            break  # the wide pairing cannot grow enough: too few stars are left unpaired
         near = _field(r, mount, near_state, near_chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec,
                       g_columns, buf)
         near_off[1] = len(near)

@@ -104,7 +104,8 @@ def refine(obs_vec: FloatArray, obs_xy: FloatArray, star_vec: FloatArray, hyp_ob
     Refused at once (``ok`` False) when a hypothesis star lies farther than ``quick_tol``
     (unit-vector distance, ~radians) from its prediction, or when fewer pairs than
     ``max(len(hyp_obs), 3)`` are found. Otherwise the attitude is refitted (Wahba, SVD) to
-    every pair and the pairing redone while the pairs grow (at most ``max_refits`` times).
+    every pair and the pairing redone while the pairs grow (at most ``max_refits`` times; not once
+    every observed star is paired).
     Returns ``(ok, obs_rows, star_rows, p, r)`` (see :func:`match_rig`), ``r`` fitted to the
     pairs returned.
     """
@@ -263,6 +264,9 @@ def _refine(obs_vec: np.ndarray, obs_xy: np.ndarray, star_vec: np.ndarray, hyp_o
     grew = True
     for _ in range(max_refits):
         r = _wahba_pairs(obs_vec, star_vec, m_obs, m_cat)
+        if len(m_obs) >= len(rows):  # every observed star is paired: the pairing cannot grow
+            grew = False
+            break
         g_obs, g_cat, g_p = _match_rig(r, obs_xy, star_vec, near, near_off, mounts, cams, dist, rows, row_off,
                                        radius, CROWD)
         if len(g_obs) <= len(m_obs):

@@ -32,6 +32,25 @@ def refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavDatabase 
     if n < 3:
         return _refused(NoSolutionReason.TOO_FEW_STARS, method, t0,
                         f"{n} star(s) given; identification needs at least 3")
+    cameras = tuple(cam for _, cam, _ in frames)
+    key = (method, sigma_px, cameras)
+    decided = db.__dict__.setdefault("_camera_refusals", {})
+    got = decided.get(key, _UNDECIDED)
+    if got is _UNDECIDED:  # once per opened database, camera geometry, method and sigma
+        if len(decided) >= CAMERA_REFUSALS_KEPT:
+            decided.clear()
+        got = decided[key] = _camera_refusal(frames, db, method, sigma_px)
+    return None if got is None else _refused(got[0], method, t0, got[1])
+
+
+CAMERA_REFUSALS_KEPT = 256
+_UNDECIDED = object()
+
+
+def _camera_refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavDatabase | NavDatabaseSet,
+                    method: str, sigma_px: float | None) -> tuple[NoSolutionReason, str] | None:
+    """:func:`refusal`'s decision for a frame's cameras (its stars aside): the reason and the
+    message, or None."""
     diagonal = max(cam.diagonal_fov_deg for _, cam, _ in frames)
     narrowest = min(min(cam.fov_deg, cam.fov_y_deg) for _, cam, _ in frames)
     ranges = db.__dict__.get("_fov_ranges")
@@ -41,11 +60,11 @@ def refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavDatabase 
         db.__dict__["_fov_ranges"] = ranges
     if any(narrowest >= lo / OUTSIDE_FACTOR and diagonal <= hi * OUTSIDE_FACTOR for lo, hi in ranges):
         why = None if sigma_px is None else method_refusal([cam for _, cam, _ in frames], db, method, sigma_px)
-        return None if why is None else _refused(NoSolutionReason.CAMERA_OUTSIDE_DATABASE, method, t0, why)
+        return None if why is None else (NoSolutionReason.CAMERA_OUTSIDE_DATABASE, why)
     served = ", ".join(f"{lo:g}-{hi:g}" for lo, hi in ranges)
     why = (f"camera of {narrowest:.3g} deg side and {diagonal:.3g} deg diagonal is outside the database's range "
            f"(side >= fov_min, diagonal <= fov_max: {served} deg)")
-    return _refused(NoSolutionReason.CAMERA_OUTSIDE_DATABASE, method, t0, f"{why}; {_build_hint(narrowest, diagonal)}")
+    return NoSolutionReason.CAMERA_OUTSIDE_DATABASE, f"{why}; {_build_hint(narrowest, diagonal)}"
 
 
 def method_refusal(cameras: Sequence[Camera], db: NavDatabase | NavDatabaseSet, method: str,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -32,6 +33,10 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     path = s.db_path or await to_thread.run_sync(ensure_default_database)
     app.state.db = open_database(Path(path).resolve())  # one version, even if the symlink is swapped now
     await to_thread.run_sync(warm_up, app.state.db)  # matchers and k-d trees before the first request
+    # what the start-up built stays for the worker's life: frozen, a full collection no longer
+    # walks it (~35 ms with the default database loaded, inside whichever request it fell on)
+    gc.collect()
+    gc.freeze()
     app.state.cameras = {name: camera_entry(spec, f"cameras.{name}") for name, spec in s.cameras.items()}
     app.state.solver = Solver(threads=s.solve_threads, timeout_s=s.solve_timeout_s, metrics=app.state.metrics,
                               options=SolveOptions(timeout_ms=s.search_timeout_ms))

@@ -354,7 +354,7 @@ def _could_pair_more(obs: Observation, deeper: NavDatabase, found: Verified, rad
     :func:`~.methods.quad_kernel.could_pair_more`)."""
     g = field_grid(deeper)
     chord = RECHECK_REACH * radius_px * obs.pixel_scale_rad
-    return bool(could_pair_more(obs.vec, found.obs.astype(np.int64), np.ascontiguousarray(found.matrix), chord,
+    return bool(could_pair_more(obs.vec, found.obs.astype(np.int64), np.array(found.matrix, np.float64), chord,
                                 *g.kernel_args()[:5], star_vec64(deeper), g.columns))
 
 
@@ -690,6 +690,10 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
         camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
         frame = _own_frames(member, camera, n_tries=1)[0]
         warm_up_screens(member, camera, frame)
+        # the deeper recheck's screen (_could_pair_more), which only an answer found past the
+        # first pass reaches (its first use in a request loaded it from numba's cache)
+        _could_pair_more(_observation([(frame, camera, None)], _ONE_CAMERA), member,
+                         Verified(np.zeros(0, np.int64), np.zeros(0, np.int64), np.eye(3), 1.0, 0), 2.5)
 
 
 def _own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centroids]:

@@ -77,3 +77,12 @@ def test_two_workers_share_one_memory_mapped_database(api_db_path: Path, frames:
     finally:
         stop_serve(proc)
     assert proc.returncode is not None
+
+
+def test_the_start_up_heap_is_frozen(client: httpx.Client) -> None:
+    # the server runs in this process (conftest.start_server): its lifespan froze what the
+    # warm-up built, so a full collection during a request does not walk it
+    import gc
+
+    assert client.get("/v1/health").status_code == 200
+    assert gc.get_freeze_count() > 1000, gc.get_freeze_count()

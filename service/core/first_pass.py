@@ -5,7 +5,9 @@ For a frame of one camera whose search plan starts with ``quad``, the steps that
 Python between them run in one (:func:`first_pass_kernel`):
 
 1. the ``quad`` search on the plan's first member (:func:`~.methods.quad_kernel.quad_search`:
-   patterns, lookup, screen, pairing, near-miss test, coincidence bound);
+   patterns, lookup, screen, pairing, near-miss test, coincidence bound); when it ends with
+   marginal answers only, the likeliest if they all agree (:func:`best_marginal`, what
+   ``Verifier.best_marginal`` decides: ~3.5% of seed 000's and 001's frames, 12% of seed 002's);
 2. when the plan's deepest member is another one, the answer re-verified against its deeper
    star table (what ``pipeline._refine`` does with :func:`~.answer.recheck`), unless no
    unpaired star lies near one of its stars (:func:`~.methods.quad_kernel.could_pair_more`);
@@ -15,10 +17,11 @@ Python between them run in one (:func:`first_pass_kernel`):
    (:func:`~.attitude.estimate`).
 
 Python converts the input (:func:`~service.core.pipeline._observation`) and builds the answer.
-The journey is one-way: a frame ``quad`` does not prove strongly comes back with the search's
-own result, which the usual path takes up without searching again (``prefetch``), so nothing
-is done twice. Every answer is the one the four-call path gives; ``tests/core/test_first_pass.py``
-compares them frame by frame.
+The journey is one-way: a frame ``quad`` does not prove comes back with the search's own
+result, which the usual path takes up without searching again (``prefetch``), so nothing is
+done twice; so does an answer whose fit's own noise is over 2.5 declared sigma, for the
+general path's ``trimmed_basin`` to re-examine. Every answer is the one the four-call path
+gives; ``tests/core/test_first_pass.py`` compares them frame by frame.
 """
 
 from __future__ import annotations
@@ -35,10 +38,19 @@ from .attitude import PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
 from .hidden import hidden_neighbours
 from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
-from .methods.quad_kernel import RECHECK_REACH, STATUS_FOUND, could_pair_more, quad_search, recheck_pairs
+from .methods.quad_kernel import (
+    RECHECK_REACH,
+    STATUS_FOUND,
+    STATUS_MARGINAL,
+    could_pair_more,
+    quad_search,
+    recheck_pairs,
+)
 from .navdb.reader import NavDatabase
 from .solution import answer_columns, star_hips
-from .verify import NEAR_MARGIN_DEG, Observation, Verifier, field_grid, star_vec64
+from .trimmed import MIN_PAIRS as TRIM_MIN_PAIRS
+from .trimmed import MIN_SIGMA_PX, SUSPECT_SIGMA, _robust_sigma_px
+from .verify import NEAR_MARGIN_DEG, Observation, Verifier, camera_probes, field_grid, star_vec64
 
 
 @dataclass(frozen=True)
@@ -108,8 +120,10 @@ def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigm
     k = obs.kernel_arrays
     static = _static_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob)
     flux = obs.flux if obs.flux is not None else _NO_FLUX
+    probes = _probes(obs.cameras[0], obs.mountings[0])
     solved, used_deep, ints, floats = first_pass_kernel(obs.vec, obs.xy, flux, obs.flux is not None, k.mounts,
-                                                        k.cams, k.dist, k.rows, k.row_off, obs.index, *static)
+                                                        k.cams, k.dist, k.rows, k.row_off, obs.index, probes,
+                                                        *static)
     if not solved:
         search = _unpack_search(ints, floats)
         return FirstPass(search, False, member, _NO_ROWS, _NO_ROWS, search[5], 1.0, _NO_RES, 0.0, (0.0, 0.0, 0.0),
@@ -168,6 +182,21 @@ def _pack_search(search):
     return ints, floats
 
 
+PROBES_KEPT = 256
+_PROBES: dict[tuple[Any, bytes], np.ndarray] = {}
+
+
+def _probes(cam: Any, mount: np.ndarray) -> np.ndarray:
+    """:func:`~.verify.camera_probes` of a camera and mounting, kept (every frame asks)."""
+    key = (cam, np.asarray(mount).tobytes())
+    got = _PROBES.get(key)
+    if got is None:
+        if len(_PROBES) >= PROBES_KEPT:
+            _PROBES.clear()
+        got = _PROBES[key] = np.ascontiguousarray(camera_probes(cam, mount), dtype=np.float64)
+    return got
+
+
 STATIC_CACHE_SIZE = 64
 
 
@@ -201,7 +230,8 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
               MAX_PROBES, MAX_CHECKS, has_deep, deep.rows, deep.star_vec, *deep_near, float(strong),
               *field_grid(member, field_deg).kernel_args(), star_mags(member), star_mags(deepest),
               field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF, star_hips(member),
-              star_hips(deepest), *hidden_neighbours(member), *hidden_neighbours(deepest))
+              star_hips(deepest), *hidden_neighbours(member), *hidden_neighbours(deepest),
+              3.0 * radius * scale, SUSPECT_SIGMA * max(float(sigma_px), MIN_SIGMA_PX))
     if len(cache) >= STATIC_CACHE_SIZE:
         cache.clear()
     cache[key] = (deepest, static)
@@ -219,14 +249,51 @@ _NO_GRID = (1.0, 1, np.zeros(1, np.int64), np.zeros(2, np.int64), np.zeros(0, np
 
 
 @njit(cache=True, nogil=True)
-def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, obs_index, n_use, tol, patterns, table,
+def best_marginal(marg_r, marg_prob, marg_off, marg_obs, marg_cat, probes, limit):
+    """:meth:`~.verify.Verifier.best_marginal` of the search's marginal answers: the index of
+    the likeliest (the first of the smallest bound), or -1 when there is none or two disagree
+    (a star paired two ways, or an image centre or corner ``probes`` ``(P, 3)`` moved by more
+    than ``limit``, unit-vector distance, between their attitudes)."""
+    n_k = len(marg_prob)
+    if n_k == 0:
+        return -1
+    best = 0
+    for k in range(1, n_k):
+        if marg_prob[k] < marg_prob[best]:
+            best = k
+    b_lo, b_hi = marg_off[best], marg_off[best + 1]
+    for k in range(n_k):
+        if k == best:
+            continue
+        for i in range(marg_off[k], marg_off[k + 1]):
+            o, c = marg_obs[i], marg_cat[i]
+            for j in range(b_lo, b_hi):
+                if (marg_obs[j] == o) != (marg_cat[j] == c):
+                    return -1
+    lim2 = limit * limit
+    for k in range(n_k):
+        for p in range(len(probes)):
+            s = 0.0
+            for a in range(3):
+                m = 0.0
+                for i in range(3):
+                    m += probes[p, i] * (marg_r[k, i, a] - marg_r[best, i, a])
+                s += m * m
+            if s > lim2:
+                return -1
+    return best
+
+
+@njit(cache=True, nogil=True)
+def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, obs_index, probes, n_use, tol,
+                      patterns, table,
                       ratio_bin, edge_bin, edge_max, star_vec, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
                       g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, radius_px, pixel_scale,
                       max_false_prob, strong_false_prob, confirm_patterns, screen_stars, max_probes, max_checks,
                       has_deep, deep_rows, d_vec, d_cell, d_side, d_keys, d_starts, d_stars, d_columns, strong,
                       a_cell, a_side, a_keys, a_starts, a_stars, a_columns, mag, d_mag, field_chord,
                       answer_radius, sigma_px, sigma_rad, prior_dof, hip, d_hip, hidden, hidden_lim, d_hidden,
-                      d_hidden_lim):
+                      d_hidden_lim, agree_limit, suspect_px):
     """The first pass (see the module's docstring). Returns ``(solved, used_deep, ints, floats)``:
     when solved ``ints`` = trials, n, the n observed rows, the n catalogue rows, then
     :func:`~.solution.answer_columns`' ints, and ``floats`` = the matrix (9, row-major),
@@ -238,7 +305,18 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
                          max_false_prob, strong_false_prob, confirm_patterns, screen_stars, np.int64(0), max_probes,
                          max_checks)
     m_obs, m_cat, r, prob, trials = search[3], search[4], search[5], search[6], search[7]
-    if search[0] != STATUS_FOUND:
+    if search[0] == STATUS_MARGINAL:  # Verifier.best_marginal: the likeliest, if all agree
+        k = best_marginal(search[10], search[11], search[12], search[13], search[14], probes, agree_limit)
+        if k >= 0:
+            lo, hi = search[12][k], search[12][k + 1]
+            m_obs, m_cat, r, prob = search[13][lo:hi].copy(), search[14][lo:hi].copy(), search[10][k].copy(), \
+                search[11][k]
+            trials = search[15][k]
+    elif search[0] != STATUS_FOUND:
+        k = -1
+    else:
+        k = 0
+    if k < 0:
         ints, floats = _pack_search(search)
         return False, False, ints, floats
     used_deep = False
@@ -267,6 +345,9 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
                 m_obs, m_cat, r, prob, used_deep = d_obs, d_cat, d_r, d_prob, True
                 vec, cell, side, keys, starts, stars, columns, mags, hid, hid_lim = d_vec, d_cell, d_side, d_keys, \
                     d_starts, d_stars, d_columns, d_mag, d_hidden, d_hidden_lim
+    if len(m_obs) >= TRIM_MIN_PAIRS and _robust_sigma_px(obs_vec, vec, m_obs, m_cat, r, pixel_scale) > suspect_px:
+        ints, floats = _pack_search(search)  # a fit the general path re-examines (trimmed_basin)
+        return False, False, ints, floats
     m_obs, m_cat, moved = answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, vec, mags, cell, side, keys, starts,
                                         stars, columns, field_chord, mounts[0], cams[0], dist[0], answer_radius,
                                         sigma_px, hid, hid_lim)

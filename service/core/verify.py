@@ -445,12 +445,15 @@ def _image_probes(obs: Observation) -> FloatArray:
 
 
 def _probes_of(obs: Observation) -> FloatArray:
-    rows = []
-    for cam, mount in zip(obs.cameras, obs.mountings, strict=True):
-        w, h = cam.width - 0.5, cam.height - 0.5
-        xy = np.array([[cam.cx, cam.cy], [-0.5, -0.5], [w, -0.5], [-0.5, h], [w, h]])
-        rows.append(cam.pixel_to_vector(xy) @ mount)  # camera -> body: R_mount^T v
-    return np.concatenate(rows)
+    return np.concatenate([camera_probes(cam, mount) for cam, mount in zip(obs.cameras, obs.mountings, strict=True)])
+
+
+def camera_probes(cam: Camera, mount: FloatArray) -> FloatArray:
+    """Body-frame unit vectors ``(5, 3)`` of one image's centre and four corners (``mount``:
+    body -> camera)."""
+    w, h = cam.width - 0.5, cam.height - 0.5
+    xy = np.array([[cam.cx, cam.cy], [-0.5, -0.5], [w, -0.5], [-0.5, h], [w, h]])
+    return cam.pixel_to_vector(xy) @ mount  # camera -> body: R_mount^T v
 
 
 def residuals_arcsec(obs: Observation, db: NavDatabase, v: Verified) -> FloatArray:

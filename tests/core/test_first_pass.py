@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from service.core import pipeline
 from service.core.answer import recheck
-from service.core.first_pass import deeper_arrays, first_pass
+from service.core.first_pass import best_marginal, deeper_arrays, first_pass
 from service.core.pipeline import SolveOptions, _observation, _search_plan, solve
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, simulate_frames
 from service.core.types import Centroids
-from service.core.verify import Verified
+from service.core.verify import Verified, Verifier, camera_probes
 
 
 def _both(monkeypatch: pytest.MonkeyPatch, centroids: Centroids, camera, db, options: SolveOptions):
@@ -91,3 +93,49 @@ def test_the_deeper_recheck_is_skipped_only_where_it_could_not_name_more_stars(d
             skipped += 1
             assert not more
     assert skipped >= 10 and named_more >= 3
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    a = axis / np.linalg.norm(axis)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+
+
+def test_the_compiled_choice_among_marginal_answers_is_the_verifiers(default_set_db) -> None:
+    # best_marginal (compiled, in the first pass) against Verifier.best_marginal on the same
+    # answers: the likeliest, unless a star is paired two ways or an image corner moves too far
+    p = PRESETS["seed000"]
+    frame = simulate_frames(p.camera, 1, SimConfig(mag_limit=p.mag_limit), rng=5)[0]
+    obs = _observation([(frame.centroids, p.camera, None)], [np.eye(3)])
+    radius = 3.0
+    limit = 3 * radius * obs.pixel_scale_rad
+    r0 = _rotation(np.array([0.3, -0.5, 0.8]), 1.1)
+    base = (np.arange(6), np.arange(100, 106))
+
+    def answer(obs_rows, cat_rows, r, prob):
+        return Verified(np.asarray(obs_rows, np.int64), np.asarray(cat_rows, np.int64), r, prob, 7)
+
+    nudge = _rotation(np.array([1.0, 0.2, 0.1]), 0.5 * limit)  # moves a corner by about half the limit
+    push = _rotation(np.array([1.0, 0.2, 0.1]), 3.0 * limit)
+    cases = {
+        "one": [answer(*base, r0, 1e-7)],
+        "agree": [answer(*base, r0, 1e-7), answer(base[0][:5], base[1][:5], nudge @ r0, 1e-9)],
+        "star paired two ways": [answer(*base, r0, 1e-9), answer([0, 7], [999, 107], r0, 1e-7)],
+        "catalogue star paired two ways": [answer(*base, r0, 1e-9), answer([9], [100], r0, 1e-7)],
+        "corner moved": [answer(*base, r0, 1e-9), answer(*base, push @ r0, 1e-7)],
+        "tie: the first": [answer(*base, r0, 1e-8), answer(base[0][:4], base[1][:4], r0, 1e-8)],
+    }
+    results = {}
+    for name, marginal in cases.items():
+        verifier = Verifier(default_set_db.members["mid"], obs, match_radius_px=radius)
+        verifier.marginal = list(marginal)
+        want = verifier.best_marginal()
+        off = np.cumsum([0] + [len(v.obs) for v in marginal])
+        got = best_marginal(np.stack([v.matrix for v in marginal]), np.array([v.false_prob for v in marginal]),
+                            off.astype(np.int64), np.concatenate([v.obs for v in marginal]),
+                            np.concatenate([v.cat for v in marginal]),
+                            np.ascontiguousarray(camera_probes(p.camera, np.eye(3))), limit)
+        assert (want is None and got == -1) or (want is marginal[got]), name
+        results[name] = got
+    assert results == {"one": 0, "agree": 1, "star paired two ways": -1, "catalogue star paired two ways": -1,
+                       "corner moved": -1, "tie: the first": 0}

@@ -143,3 +143,14 @@ def test_bench_maxangle_layout_smoke(maxangle_db: Path, capsys: pytest.CaptureFi
     for row in rows:  # both layouts return the records (a tolerance's edge aside)
         both, one_only = (int(x) for x in row.rstrip(" |").split("|")[-1].split("/"))
         assert both > 0 and one_only <= both // 1000
+
+
+def test_profile_default_by_stars_smoke(default_set_db, capsys: pytest.CaptureFixture[str]) -> None:
+    from bench import profile_default
+
+    profile_default.main(["--camera", "seed002", "--frames", "30", "--random", "2", "--by-stars"])
+    out = capsys.readouterr().out
+    assert "seed002 random points" in out and "by centroids in the frame" in out
+    shares = [float(line.split("|")[2].strip().rstrip("%")) for line in out.splitlines()
+              if line.startswith("| ") and line.split("|")[1].strip().isdigit()]
+    assert abs(sum(shares) - 100.0) < 1.0  # every frame counted once

@@ -494,10 +494,10 @@ def sky_mask(db: NavDatabase, chord: float) -> SkyMask:
     key = ("sky_mask", reach)
     mask = cache.get(key)
     if mask is None:
-        masks = [k for k in cache if isinstance(k, tuple) and k[0] == "sky_mask"]
+        masks = [k for k in list(cache) if isinstance(k, tuple) and k[0] == "sky_mask"]
         if len(masks) >= MASKS_PER_DATABASE:
             for k in masks:
-                del cache[k]
+                cache.pop(k, None)  # another thread may be clearing them too
         mask = cache[key] = build_sky_mask(np.asarray(db.stars.vec), reach * (1.0 + 1e-9))
     return mask
 

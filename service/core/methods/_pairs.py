@@ -201,7 +201,11 @@ def join_windows(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_ik: int, 
     heads = getattr(_HEADS, "arrays", None)
     if heads is None or len(heads[0]) < n_stars:  # per thread: the kernel uses them as scratch
         heads = _HEADS.arrays = (np.full(n_stars, -1, np.int64), np.full(n_stars, -1, np.int64))
-    return join_windows_linked(pairs, s_ij, e_ij, s_ik, e_ik, s_jk, e_jk, heads[0], heads[1])
+    try:
+        return join_windows_linked(pairs, s_ij, e_ij, s_ik, e_ik, s_jk, e_jk, heads[0], heads[1])
+    except BaseException:  # a kernel stopped half-way (out of memory) leaves its lists behind
+        _HEADS.arrays = None
+        raise
 
 
 @njit(cache=True, nogil=True)

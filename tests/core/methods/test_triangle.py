@@ -136,3 +136,35 @@ def test_compiled_joins_give_the_vectorised_join_in_its_order(db: NavDatabase) -
             compared += len(want)
             small += int((e - s).sum()) <= LINKED_JOIN_MAX_ROWS
     assert compared > 100 and small >= 6
+
+
+def test_small_window_joins_run_side_by_side_on_threads(db: NavDatabase) -> None:
+    # the linked-list join keeps its scratch per thread: joins on four threads at once give
+    # what the counting sort gives one at a time
+    from concurrent.futures import ThreadPoolExecutor
+
+    from service.core.methods._pairs import LINKED_JOIN_MAX_ROWS, join_windows, join_windows_counting
+
+    m = get_matcher(db, "triangle")
+    pairs, angles = np.asarray(m.pairs), np.asarray(m.angles)
+    vec = np.asarray(db.stars.vec, np.float64)
+    rng = np.random.default_rng(11)
+    jobs = []
+    while len(jobs) < 1500:  # catalogue triangles: a star and two of its neighbours
+        a = int(rng.integers(len(vec)))
+        near = np.flatnonzero(vec @ vec[a] > math.cos(m.max_angle * 0.6))
+        near = near[near != a]
+        if len(near) < 2:
+            continue
+        b, c = rng.choice(near, 2, replace=False)
+        sides = np.arccos(np.clip([vec[a] @ vec[b], vec[a] @ vec[c], vec[b] @ vec[c]], -1, 1))
+        s = np.searchsorted(angles, sides - 2e-5)
+        e = np.searchsorted(angles, sides + 2e-5, side="right")
+        jobs.append((pairs, int(s[0]), int(e[0]), int(s[1]), int(e[1]), int(s[2]), int(e[2]), m.n_stars))
+    want = [join_windows_counting(*job) for job in jobs]
+    with ThreadPoolExecutor(4) as pool:
+        got = list(pool.map(lambda job: join_windows(*job), jobs))
+    assert sum(len(w) for w in want) >= 1300  # nearly every job holds its own triangle
+    assert sum(sum(j[k + 1] - j[k] for k in (1, 3, 5)) <= LINKED_JOIN_MAX_ROWS for j in jobs) > 1100
+    for w, g in zip(want, got, strict=True):
+        np.testing.assert_array_equal(g, w)

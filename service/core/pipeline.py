@@ -25,6 +25,7 @@ from .first_pass import deeper_arrays, first_pass
 from .hidden import hidden_kernel, hidden_neighbours
 from .match import CROWD
 from .methods import SolveContext, get_matcher, get_method, resolve
+from .methods.quad import MIN_STARS as QUAD_MIN_STARS
 from .methods.quad import QUERY_STARS
 from .methods.quad_kernel import RECHECK_REACH, could_pair_more
 from .navdb.reader import NavDatabase, NavDatabaseSet
@@ -205,6 +206,7 @@ def solve_rig(
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
     # the coincidence bound is multiplied by
     misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?
+    unprovable: list[str] = []  # methods skipped: no answer of theirs could pass the bound here
     search_deadline = deadline  # shortened after an exhaustive quad miss (EXHAUSTED_BUDGET_MS)
     trial_limit: int | None = None  # set after an exhaustive quad miss of 5-7 stars (FEW_STARS_MAX_TRIALS)
     for sigma in sigmas:
@@ -219,7 +221,7 @@ def solve_rig(
                     trial_limit = trials + FEW_STARS_MAX_TRIALS
             db = member
             found, used, trials = _identify(obs, db, methods, sigma, options, search_deadline, hint, trials, tried,
-                                            misses, trial_limit)
+                                            misses, trial_limit, unprovable)
             if found is not None or time.perf_counter() > search_deadline:
                 break
         if found is not None or time.perf_counter() > search_deadline:
@@ -228,7 +230,7 @@ def solve_rig(
     timings["identify"] = (t2 - t1) * 1e3
     if found is None:
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        return no_solution(method, tried, trials, t2 > deadline, timings)
+        return no_solution(method, tried, trials, t2 > deadline, timings, unprovable, len(obs))
     if deepest is not db:
         refined = _refine(obs, db, deepest, found, sigma, options)
         if refined is not None:
@@ -361,21 +363,26 @@ def _could_pair_more(obs: Observation, deeper: NavDatabase, found: Verified, rad
 def _identify(
     obs: Observation, db: NavDatabase, methods: list[str], sigma: float, options: SolveOptions,
     deadline: float, hint: tuple[Quaternion, float] | None, trials: int, tried: list[str] | None = None,
-    misses: list[bool] | None = None, trial_limit: int | None = None,
+    misses: list[bool] | None = None, trial_limit: int | None = None, unprovable: list[str] | None = None,
 ) -> tuple[Verified | None, str, int]:
     """One pass of every method at centroid error ``sigma`` (px); ``trials`` hypotheses were
     already tried on this frame (they count in the coincidence bound). Appends the name of each
-    method it runs to ``tried``; stops at ``deadline`` (or once ``trial_limit`` hypotheses were
-    tried) without starting another method."""
+    method it runs to ``tried``, and to ``unprovable`` each it skips because no answer of it could
+    pass the coincidence bound on this frame; stops at ``deadline`` (or once ``trial_limit``
+    hypotheses were tried) without starting another method."""
     radius = options.match_radius_px or max(2.5, 3.0 * sigma)
     tol = (3.0 * math.sqrt(2.0) * sigma + 0.5) * obs.pixel_scale_rad
     verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob, trials=trials,
                         deadline=deadline, trial_limit=trial_limit)
     if len(obs) < verifier.min_matches:  # only a sparse proof can name so few stars (SPARSE_PROOF_METHODS)
         methods = [name for name in methods if name in SPARSE_PROOF_METHODS]
+    elif len(obs) < QUAD_MIN_STARS and len(obs.cameras) == 1:  # quad would return at once
+        methods = [name for name in methods if name != "quad"]
     used = methods[-1] if methods else ""
     for name in methods:
         if name in TRIANGLE_PROOF_METHODS and not verifier.could_prove(3):
+            if unprovable is not None:
+                unprovable.append(name)
             continue  # no answer of this frame could pass the bound (Verifier.could_prove)
         if tried is not None:
             if tried and (time.perf_counter() > deadline or verifier.over_limit()):

@@ -106,12 +106,19 @@ def _refused(reason: NoSolutionReason, method: str, t0: float, message: str) -> 
                     timings_ms={"total": (time.perf_counter() - t0) * 1e3})
 
 
-def no_solution(method: str, tried: list[str], trials: int, late: bool,
-                timings: dict[str, float]) -> Solution:
-    """The answer of a searched frame that nothing proved: why, and what ran."""
+def no_solution(method: str, tried: list[str], trials: int, late: bool, timings: dict[str, float],
+                unprovable: Sequence[str] = (), n_stars: int | None = None) -> Solution:
+    """The answer of a searched frame that nothing proved: why, and what ran. ``unprovable``:
+    methods skipped because no answer of theirs could pass the coincidence bound on this frame of
+    ``n_stars`` stars (when nothing else ran, that is the reason: too few stars)."""
     ran = tuple(dict.fromkeys(tried))
+    skipped = ", ".join(m for m in dict.fromkeys(unprovable) if m not in ran)  # on no member
+    note = (f"; not run: {skipped} (even with all {n_stars} stars paired, no answer of theirs could pass "
+            f"the coincidence bound on this camera)") if skipped else ""
     if late:
         reason, why = NoSolutionReason.TIME_LIMIT, "the time limit ended the search"
+    elif not ran and skipped:
+        reason, why = NoSolutionReason.TOO_FEW_STARS, f"{n_stars} stars are too few to prove an identification here"
     elif trials == 0:
         reason, why = NoSolutionReason.NO_PATTERN_MATCH, "no catalogue pattern matched the frame's"
     else:
@@ -119,7 +126,7 @@ def no_solution(method: str, tried: list[str], trials: int, late: bool,
                        f"{trials} candidate attitude(s) checked, none proven beyond the coincidence bound")
     hint = f"; {FAILURE_HINTS[method]}" if method in FAILURE_HINTS else ""
     return Solution(SolveStatus.NO_SOLUTION, tried[-1] if tried else method, reason=reason,
-                    methods_tried=ran, message=f"{why} (methods tried: {', '.join(ran) or 'none'}){hint}",
+                    methods_tried=ran, message=f"{why} (methods tried: {', '.join(ran) or 'none'}){note}{hint}",
                     timings_ms=timings)
 
 

@@ -33,7 +33,9 @@ class SolveStatus(str, enum.Enum):
 class NoSolutionReason(str, enum.Enum):
     """Why a solve answered ``no_solution`` (machine-readable; ``Solution.message`` says it in words).
 
-    ``too_few_stars``: fewer than 3 centroids, refused before any method runs.
+    ``too_few_stars``: fewer than 3 centroids, refused before any method runs; or so few for the
+    camera that every method able to run was skipped, since even with every star paired no answer
+    of theirs could pass the coincidence bound (``message`` names them).
     ``camera_outside_database``: no member of the database serves the camera's field, refused
     before any method runs. ``no_pattern_match``: the methods ran to the end and no catalogue
     pattern matched the frame's. ``not_proven``: candidates were checked, none was proven beyond

@@ -10,7 +10,7 @@ from service.core.pipeline import SolveOptions, solve
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, random_points, simulate_frames
 from service.core.camera import Camera
-from service.core.types import Centroids
+from service.core.types import Centroids, NoSolutionReason
 from tests.conftest import SEED000_CAMERA
 
 SEED000_METHODS = ["maxangle", "pyramid"]
@@ -214,6 +214,9 @@ def test_a_frame_no_answer_could_pass_skips_the_triangle_fallbacks(seed000_db, m
 
     four = solve(random_points(SEED000_CAMERA, 4, rng=5), SEED000_CAMERA, seed000_db)
     assert not four.solved and not set(four.methods_tried) & pipeline.TRIANGLE_PROOF_METHODS
+    # nothing else could run: the answer says the frame has too few stars, and what was not run
+    assert four.methods_tried == () and four.reason is NoSolutionReason.TOO_FEW_STARS and four.method == "auto"
+    assert "not run: maxangle, pyramid" in four.message and "4 stars" in four.message
     five = solve(random_points(SEED000_CAMERA, 5, rng=5), SEED000_CAMERA, seed000_db)
     assert not five.solved and five.methods_tried == ("maxangle", "pyramid")
     monkeypatch.setattr(pipeline, "TRIANGLE_PROOF_METHODS", frozenset())
@@ -245,3 +248,20 @@ def test_few_star_frames_searched_in_full_get_a_budget_of_hypotheses(default_set
     monkeypatch.setattr(pipeline.Verifier, "check", check)
     assert not solve(frame, p.camera, default_set_db, options=opts).solved
     assert seen == []  # the first screen used up the budget before any check
+
+
+def test_a_4_star_frame_is_not_given_to_quad_and_says_why_on_the_default_database(default_set_db) -> None:
+    # seed 000's 1024-px camera: quad needs 5 stars and the triangle fallbacks cannot pass the
+    # bound, so nothing runs; seed 002's 4096-px camera can prove 4 stars, so its fallbacks run
+    p = PRESETS["seed000"]
+    frame = simulate_frames(p.camera, 1, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0), rng=3)[0]
+    four = solve(Centroids(frame.centroids.xy[:4], frame.centroids.flux[:4]), p.camera, default_set_db,
+                 options=SolveOptions(centroid_sigma_px=1.0))
+    assert four.reason is NoSolutionReason.TOO_FEW_STARS and four.methods_tried == ()
+    assert "not run: maxangle, pyramid" in four.message
+    p = PRESETS["seed002"]
+    frame = simulate_frames(p.camera, 1, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0), rng=3)[0]
+    four = solve(Centroids(frame.centroids.xy[:4], frame.centroids.flux[:4]), p.camera, default_set_db,
+                 options=SolveOptions(centroid_sigma_px=1.0))
+    assert "quad" not in four.methods_tried and "maxangle" in four.methods_tried
+    assert four.solved or four.reason is not NoSolutionReason.TOO_FEW_STARS

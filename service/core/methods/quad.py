@@ -57,6 +57,10 @@ class Quad:
         return QuadMatcher(db)
 
 
+MIN_STARS = 5
+"""Stars a frame needs for ``quad``: a 4-star pattern and one more to pair."""
+
+
 class QuadMatcher:
     """The table of one database, as the arrays the kernel reads (built once)."""
 
@@ -80,7 +84,7 @@ class QuadMatcher:
         v = ctx.verifier
         v.exhausted = False
         obs = ctx.obs
-        if len(obs.cameras) != 1 or len(obs) < 5:
+        if len(obs.cameras) != 1 or len(obs) < MIN_STARS:
             return None
         pre = obs.__dict__.pop("_quad_prefetch", None)  # the first pass's own search (service.core.first_pass)
         if pre is not None and pre[0] is self.db and v.trials == 0:

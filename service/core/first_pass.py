@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -86,8 +86,7 @@ def deeper_arrays(shallow: NavDatabase, deep: NavDatabase) -> Deeper:
     return got[1]
 
 
-@dataclass(frozen=True, slots=True)
-class FirstPass:
+class FirstPass(NamedTuple):
     """What :func:`first_pass` found.
 
     ``search`` is the ``quad`` search's own result (see :func:`~.methods.quad_kernel.quad_search`);

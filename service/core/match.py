@@ -63,13 +63,20 @@ def _camera_rows(cameras: tuple[Any, ...]) -> tuple[np.ndarray, np.ndarray]:
     return got
 
 
+IDENTITY_MOUNTING = np.eye(3)
+"""The identity mounting :func:`service.core.pipeline.solve` passes for one camera (by identity:
+its packed copy below is made once; the kernels only read it)."""
+_IDENTITY_MOUNT = IDENTITY_MOUNTING.reshape(1, 3, 3).copy()
+
+
 def rig_arrays(cameras: Sequence[Any], mountings: Sequence[np.ndarray], by_camera: Sequence[np.ndarray]) -> RigArrays:
     """Pack cameras (:class:`~service.core.camera.Camera`), their mountings and their observed
     rows for the kernels."""
     cams, dist = _camera_rows(tuple(cameras))
     if len(by_camera) == 1:  # one camera, every frame: skip the general packing (~20 us)
         rows = np.asarray(by_camera[0], np.int64)
-        mount = np.array(mountings[0], dtype=np.float64).reshape(1, 3, 3)
+        m = mountings[0]
+        mount = _IDENTITY_MOUNT if m is IDENTITY_MOUNTING else np.array(m, dtype=np.float64).reshape(1, 3, 3)
         return RigArrays(mount, cams, dist, rows, np.array([0, len(rows)], np.int64))
     off = np.zeros(len(by_camera) + 1, np.int64)
     off[1:] = np.cumsum([len(r) for r in by_camera])

@@ -23,7 +23,7 @@ from .camera import Camera, brightest_first
 from .errors import InvalidInputError, UnknownMethodError
 from .first_pass import deeper_arrays, first_pass
 from .hidden import hidden_kernel, hidden_neighbours
-from .match import CROWD
+from .match import CROWD, IDENTITY_MOUNTING
 from .methods import SolveContext, get_matcher, get_method, resolve
 from .methods.quad import MIN_STARS as QUAD_MIN_STARS
 from .methods.quad import QUERY_STARS
@@ -248,7 +248,7 @@ def _stamped(sol: Solution, tried: list[str], timings: dict[str, float], t0: flo
     return sol
 
 
-_IDENTITY = np.eye(3)
+_IDENTITY = IDENTITY_MOUNTING  # the one rig_arrays recognises
 
 _ONE_CAMERA = [_IDENTITY]
 
@@ -262,7 +262,7 @@ def _search_plan(db: NavDatabase | NavDatabaseSet, cameras: list[Camera], method
     """The members and methods to search, in order (:func:`_plan`), and the member to refine an
     answer against, for these cameras; kept per database, as every frame of a camera asks the
     same (choosing them costs ~30 us a frame)."""
-    key = (method, sigma_px, tuple((c.fov_deg, c.diagonal_fov_deg) for c in cameras))
+    key = (method, sigma_px, tuple(cameras))  # cameras are hashable values: a camera's fields fix its plan
     cache = db.__dict__.setdefault("_plans", {})
     if key in cache:
         return cache[key]

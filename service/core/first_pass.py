@@ -6,8 +6,9 @@ Python between them run in one (:func:`first_pass_kernel`):
 
 1. the ``quad`` search on the plan's first member (:func:`~.methods.quad_kernel.quad_search`:
    patterns, lookup, screen, pairing, near-miss test, coincidence bound); when it ends with
-   marginal answers only, the likeliest if they all agree (:func:`best_marginal`, what
-   ``Verifier.best_marginal`` decides: ~3.5% of seed 000's and 001's frames, 12% of seed 002's);
+   marginal answers only, the likeliest if they all agree (:func:`~.verify.marginal_choice`,
+   ``Verifier.best_marginal``'s own choice: ~3.5% of seed 000's and 001's frames, 12% of seed
+   002's);
 2. when the plan's deepest member is another one, the answer re-verified against its deeper
    star table (what ``pipeline._refine`` does with :func:`~.answer.recheck`), unless no
    unpaired star lies near one of its stars (:func:`~.methods.quad_kernel.could_pair_more`);
@@ -50,7 +51,15 @@ from .navdb.reader import NavDatabase
 from .solution import answer_columns, star_hips
 from .trimmed import MIN_PAIRS as TRIM_MIN_PAIRS
 from .trimmed import MIN_SIGMA_PX, SUSPECT_SIGMA, _robust_sigma_px
-from .verify import NEAR_MARGIN_DEG, Observation, Verifier, camera_probes, field_grid, star_vec64
+from .verify import (
+    NEAR_MARGIN_DEG,
+    Observation,
+    Verifier,
+    camera_probes,
+    field_grid,
+    marginal_choice,
+    star_vec64,
+)
 
 
 @dataclass(frozen=True)
@@ -119,7 +128,7 @@ def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigm
     k = obs.kernel_arrays
     static = _static_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob)
     flux = obs.flux if obs.flux is not None else _NO_FLUX
-    probes = _probes(obs.cameras[0], obs.mountings[0])
+    probes = camera_probes(obs.cameras[0], obs.mountings[0])
     solved, used_deep, ints, floats = first_pass_kernel(obs.vec, obs.xy, flux, obs.flux is not None, k.mounts,
                                                         k.cams, k.dist, k.rows, k.row_off, obs.index, probes,
                                                         *static)
@@ -181,21 +190,6 @@ def _pack_search(search):
     return ints, floats
 
 
-PROBES_KEPT = 256
-_PROBES: dict[tuple[Any, bytes], np.ndarray] = {}
-
-
-def _probes(cam: Any, mount: np.ndarray) -> np.ndarray:
-    """:func:`~.verify.camera_probes` of a camera and mounting, kept (every frame asks)."""
-    key = (cam, np.asarray(mount).tobytes())
-    got = _PROBES.get(key)
-    if got is None:
-        if len(_PROBES) >= PROBES_KEPT:
-            _PROBES.clear()
-        got = _PROBES[key] = np.ascontiguousarray(camera_probes(cam, mount), dtype=np.float64)
-    return got
-
-
 STATIC_CACHE_SIZE = 64
 
 
@@ -248,42 +242,6 @@ _NO_GRID = (1.0, 1, np.zeros(1, np.int64), np.zeros(2, np.int64), np.zeros(0, np
 
 
 @njit(cache=True, nogil=True)
-def best_marginal(marg_r, marg_prob, marg_off, marg_obs, marg_cat, probes, limit):
-    """:meth:`~.verify.Verifier.best_marginal` of the search's marginal answers: the index of
-    the likeliest (the first of the smallest bound), or -1 when there is none or two disagree
-    (a star paired two ways, or an image centre or corner ``probes`` ``(P, 3)`` moved by more
-    than ``limit``, unit-vector distance, between their attitudes)."""
-    n_k = len(marg_prob)
-    if n_k == 0:
-        return -1
-    best = 0
-    for k in range(1, n_k):
-        if marg_prob[k] < marg_prob[best]:
-            best = k
-    b_lo, b_hi = marg_off[best], marg_off[best + 1]
-    for k in range(n_k):
-        if k == best:
-            continue
-        for i in range(marg_off[k], marg_off[k + 1]):
-            o, c = marg_obs[i], marg_cat[i]
-            for j in range(b_lo, b_hi):
-                if (marg_obs[j] == o) != (marg_cat[j] == c):
-                    return -1
-    lim2 = limit * limit
-    for k in range(n_k):
-        for p in range(len(probes)):
-            s = 0.0
-            for a in range(3):
-                m = 0.0
-                for i in range(3):
-                    m += probes[p, i] * (marg_r[k, i, a] - marg_r[best, i, a])
-                s += m * m
-            if s > lim2:
-                return -1
-    return best
-
-
-@njit(cache=True, nogil=True)
 def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, obs_index, probes, n_use, tol,
                       patterns, table,
                       ratio_bin, edge_bin, edge_max, star_vec, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
@@ -305,7 +263,7 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
                          max_checks)
     m_obs, m_cat, r, prob, trials = search[3], search[4], search[5], search[6], search[7]
     if search[0] == STATUS_MARGINAL:  # Verifier.best_marginal: the likeliest, if all agree
-        k = best_marginal(search[10], search[11], search[12], search[13], search[14], probes, agree_limit)
+        k = marginal_choice(search[10], search[11], search[12], search[13], search[14], probes, agree_limit)
         if k >= 0:
             lo, hi = search[12][k], search[12][k + 1]
             m_obs, m_cat, r, prob = search[13][lo:hi].copy(), search[14][lo:hi].copy(), search[10][k].copy(), \

@@ -35,7 +35,7 @@ from .residuals import distant_pairs
 from .solution import answer, solution_of
 from .trimmed import trimmed_basin
 from .types import Centroids, Solution, SolveStatus
-from .verify import Observation, Verified, Verifier, field_grid, star_tree, star_vec64
+from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier, field_grid, star_tree, star_vec64
 
 Quaternion = Sequence[float]
 
@@ -354,7 +354,7 @@ def _could_pair_more(obs: Observation, deeper: NavDatabase, found: Verified, rad
     """False if no observed star outside ``found`` lies near a star of ``deeper`` under its
     attitude, so that re-verifying there cannot name more stars (one camera; see
     :func:`~.methods.quad_kernel.could_pair_more`)."""
-    g = field_grid(deeper)
+    g = field_grid(deeper, obs.cameras[0].diagonal_fov_deg / 2 + NEAR_MARGIN_DEG)  # the recheck's own grid
     chord = RECHECK_REACH * radius_px * obs.pixel_scale_rad
     return bool(could_pair_more(obs.vec, found.obs.astype(np.int64), np.array(found.matrix, np.float64), chord,
                                 *g.kernel_args()[:5], star_vec64(deeper), g.columns))

@@ -25,6 +25,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 from scipy.special import betainc
 
@@ -164,25 +165,18 @@ class Verifier:
         one catalogue star with two observed stars) and no point of any image moves by more
         than three match radii between their attitudes. (A rotation angle alone would call
         two right answers apart: roll is the least constrained axis, and a roll of a few
-        arcminutes moves the image edge by about a pixel.) Every attitude is compared in one
-        array operation: a frame proven through many triangles holds a dozen of them."""
-        if not self.marginal:
-            return None
-        best = min(self.marginal, key=lambda v: v.false_prob)
-        if len(self.marginal) == 1:
-            return best
-        b_obs, b_cat = best.obs.tolist(), best.cat.tolist()
-        by_obs, by_cat = dict(zip(b_obs, b_cat, strict=True)), dict(zip(b_cat, b_obs, strict=True))
-        for v in self.marginal:
-            if v is not best and not _agrees(v, by_obs, by_cat):
-                return None
-        limit = 3 * self.match_radius_px * self.obs.pixel_scale_rad
-        probe = _image_probes(self.obs)
-        matrices = np.stack([v.matrix for v in self.marginal])  # (K, 3, 3)
-        moved = probe @ (matrices - best.matrix)  # R^T p, as rows: (K, P, 3)
-        if np.any(np.einsum("kpi,kpi->kp", moved, moved) > limit * limit):
-            return None
-        return best
+        arcminutes moves the image edge by about a pixel.) One compiled call
+        (:func:`marginal_choice`, which ``auto``'s first pass calls too)."""
+        if len(self.marginal) <= 1:
+            return self.marginal[0] if self.marginal else None
+        off = np.zeros(len(self.marginal) + 1, np.int64)
+        off[1:] = np.cumsum([len(v.obs) for v in self.marginal])
+        k = marginal_choice(np.stack([np.asarray(v.matrix, np.float64) for v in self.marginal]),
+                            np.array([v.false_prob for v in self.marginal], np.float64), off,
+                            np.concatenate([v.obs for v in self.marginal]).astype(np.int64),
+                            np.concatenate([v.cat for v in self.marginal]).astype(np.int64),
+                            _image_probes(self.obs), 3 * self.match_radius_px * self.obs.pixel_scale_rad)
+        return None if k < 0 else self.marginal[k]
 
     def names_marginal(self, obs_idx: IntArray, cat_idx: IntArray) -> bool:
         """Does a marginal answer already pair every observed row ``obs_idx`` with ``cat_idx``?
@@ -424,15 +418,42 @@ NEAR_MARGIN_DEG = 0.5
 _NEAR_REUSE_COS = math.cos(math.radians(NEAR_MARGIN_DEG - 0.2))
 
 
-def _agrees(a: Verified, by_obs: dict[int, int], by_cat: dict[int, int]) -> bool:
-    """True if ``a`` pairs no observed star with a catalogue star other than the one
-    ``by_obs`` gives it, and no catalogue star with an observed star other than ``by_cat``'s
-    (another answer's pairs both ways; a few dozen pairs: dicts are ~10x faster than
-    ``np.intersect1d``)."""
-    for o, c in zip(a.obs.tolist(), a.cat.tolist(), strict=True):
-        if by_obs.get(o, c) != c or by_cat.get(c, o) != o:
-            return False
-    return True
+@njit(cache=True, nogil=True)
+def marginal_choice(marg_r, marg_prob, marg_off, marg_obs, marg_cat, probes, limit):
+    """:meth:`Verifier.best_marginal` over arrays: answer ``k`` has attitude ``marg_r[k]``
+    (ICRS -> body), bound ``marg_prob[k]`` and pairs ``marg_obs``/``marg_cat`` in
+    ``marg_off[k]:marg_off[k + 1]``. Returns the index of the likeliest (the first of the
+    smallest bound), or -1 when there is none or two disagree: a star paired two ways, or an
+    image centre or corner ``probes`` ``(P, 3)`` (body frame) moved by more than ``limit``
+    (unit-vector distance) between their attitudes."""
+    n_k = len(marg_prob)
+    if n_k == 0:
+        return -1
+    best = 0
+    for k in range(1, n_k):
+        if marg_prob[k] < marg_prob[best]:
+            best = k
+    b_lo, b_hi = marg_off[best], marg_off[best + 1]
+    for k in range(n_k):
+        if k == best:
+            continue
+        for i in range(marg_off[k], marg_off[k + 1]):
+            o, c = marg_obs[i], marg_cat[i]
+            for j in range(b_lo, b_hi):
+                if (marg_obs[j] == o) != (marg_cat[j] == c):
+                    return -1
+    lim2 = limit * limit
+    for k in range(n_k):
+        for p in range(len(probes)):
+            s = 0.0
+            for a in range(3):
+                m = 0.0
+                for i in range(3):
+                    m += probes[p, i] * (marg_r[k, i, a] - marg_r[best, i, a])
+                s += m * m
+            if s > lim2:
+                return -1
+    return best
 
 
 def _image_probes(obs: Observation) -> FloatArray:
@@ -448,12 +469,22 @@ def _probes_of(obs: Observation) -> FloatArray:
     return np.concatenate([camera_probes(cam, mount) for cam, mount in zip(obs.cameras, obs.mountings, strict=True)])
 
 
+PROBES_KEPT = 256
+_PROBES: dict[tuple[Camera, bytes], FloatArray] = {}
+
+
 def camera_probes(cam: Camera, mount: FloatArray) -> FloatArray:
     """Body-frame unit vectors ``(5, 3)`` of one image's centre and four corners (``mount``:
-    body -> camera)."""
-    w, h = cam.width - 0.5, cam.height - 0.5
-    xy = np.array([[cam.cx, cam.cy], [-0.5, -0.5], [w, -0.5], [-0.5, h], [w, h]])
-    return cam.pixel_to_vector(xy) @ mount  # camera -> body: R_mount^T v
+    body -> camera), kept per camera and mounting (every frame of a camera asks; read only)."""
+    key = (cam, np.asarray(mount).tobytes())
+    got = _PROBES.get(key)
+    if got is None:
+        if len(_PROBES) >= PROBES_KEPT:
+            _PROBES.clear()
+        w, h = cam.width - 0.5, cam.height - 0.5
+        xy = np.array([[cam.cx, cam.cy], [-0.5, -0.5], [w, -0.5], [-0.5, h], [w, h]])
+        got = _PROBES[key] = np.ascontiguousarray(cam.pixel_to_vector(xy) @ mount, np.float64)  # R_mount^T v
+    return got
 
 
 def residuals_arcsec(obs: Observation, db: NavDatabase, v: Verified) -> FloatArray:

@@ -9,12 +9,12 @@ import pytest
 
 from service.core import pipeline
 from service.core.answer import recheck
-from service.core.first_pass import best_marginal, deeper_arrays, first_pass
+from service.core.first_pass import deeper_arrays, first_pass
 from service.core.pipeline import SolveOptions, _observation, _search_plan, solve
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, simulate_frames
 from service.core.types import Centroids
-from service.core.verify import Verified, Verifier, camera_probes
+from service.core.verify import Verified, Verifier, camera_probes, marginal_choice
 
 
 def _both(monkeypatch: pytest.MonkeyPatch, centroids: Centroids, camera, db, options: SolveOptions):
@@ -102,8 +102,9 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def test_the_compiled_choice_among_marginal_answers_is_the_verifiers(default_set_db) -> None:
-    # best_marginal (compiled, in the first pass) against Verifier.best_marginal on the same
-    # answers: the likeliest, unless a star is paired two ways or an image corner moves too far
+    # the compiled choice (auto's first pass calls it on the search's arrays) and
+    # Verifier.best_marginal on the same answers: the likeliest, unless a star is paired two ways
+    # or an image corner moves too far
     p = PRESETS["seed000"]
     frame = simulate_frames(p.camera, 1, SimConfig(mag_limit=p.mag_limit), rng=5)[0]
     obs = _observation([(frame.centroids, p.camera, None)], [np.eye(3)])
@@ -131,7 +132,7 @@ def test_the_compiled_choice_among_marginal_answers_is_the_verifiers(default_set
         verifier.marginal = list(marginal)
         want = verifier.best_marginal()
         off = np.cumsum([0] + [len(v.obs) for v in marginal])
-        got = best_marginal(np.stack([v.matrix for v in marginal]), np.array([v.false_prob for v in marginal]),
+        got = marginal_choice(np.stack([v.matrix for v in marginal]), np.array([v.false_prob for v in marginal]),
                             off.astype(np.int64), np.concatenate([v.obs for v in marginal]),
                             np.concatenate([v.cat for v in marginal]),
                             np.ascontiguousarray(camera_probes(p.camera, np.eye(3))), limit)

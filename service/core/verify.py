@@ -222,7 +222,7 @@ class Verifier:
         hits = self._screen(obs_tris, cands, others)
         order = np.argsort(-hits, kind="stable")
         order = order[hits[order] >= (1 if len(self.obs) > 3 else 0)]
-        for row in order[:8]:
+        for row in order[:CHECKS_PER_CHUNK]:
             if time.perf_counter() > self.deadline or self.over_limit():
                 break
             if self.marginal and self.names_marginal(obs_tris[row], cands[row]):
@@ -409,6 +409,9 @@ class Verifier:
         self._near_cache = (np.array(r_body, dtype=np.float64), near, off)
         return near, off
 
+
+CHECKS_PER_CHUNK = 8
+"""Candidates of one batch (:meth:`Verifier.screen_and_check_many`) fully checked, best screened first."""
 
 SETTLE_FACTORS = (3.0, 6.0)
 """Wide radii (in match radii) at which an accepted attitude is tested for a near miss."""

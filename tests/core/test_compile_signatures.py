@@ -24,6 +24,8 @@ KERNELS = {
     "service.core.methods.quad_kernel": ["quad_search", "verify_pairs", "recheck_pairs", "_verify", "could_pair_more"],
     "service.core.match": ["_refine", "_match_rig", "_wahba_pairs"],
     "service.core.answer": ["answer_kernel"],
+    "service.core.methods.maxangle": ["_triangles_of"],
+    "service.core.methods.maxangle_search": ["search_chunks"],
 }
 
 SCRIPT = f"""
@@ -58,5 +60,6 @@ def test_the_default_path_compiles_each_kernel_once(default_set_db: object) -> N
     assert set(signatures) == {n for names in KERNELS.values() for n in names}
     for name, sigs in signatures.items():
         assert len(sigs) <= 1, (name, sigs)
-    for name in ("first_pass_kernel", "quad_search", "recheck_pairs", "answer_kernel"):  # called from Python
+    for name in ("first_pass_kernel", "quad_search", "recheck_pairs", "answer_kernel", "_triangles_of",
+                 "search_chunks"):  # called from Python
         assert len(signatures[name]) == 1, (name, signatures[name])

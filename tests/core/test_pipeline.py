@@ -5,7 +5,7 @@ import pytest
 
 from service.core.errors import InvalidInputError, UnknownMethodError
 from service.core.evaluate import score
-from service.core.methods import method_names
+from service.core.methods import maxangle, method_names
 from service.core.pipeline import SolveOptions, solve
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, random_points, simulate_frames
@@ -238,6 +238,8 @@ def test_few_star_frames_searched_in_full_get_a_budget_of_hypotheses(default_set
     monkeypatch.setattr(pipeline, "FEW_STARS_MAX_TRIALS", 0)
     assert solve(frame, p.camera, default_set_db, options=opts).methods_tried == ("quad",)
     monkeypatch.setattr(pipeline, "FEW_STARS_MAX_TRIALS", 1)  # one screen's worth, then no further check
+    compiled = solve(frame, p.camera, default_set_db, options=opts)  # maxangle_search counts as the loop does
+    monkeypatch.setattr(maxangle, "COMPILED_SEARCH", False)  # the Python loop, whose checks can be seen
     seen: list[int] = []
     real = pipeline.Verifier.check
 
@@ -246,8 +248,10 @@ def test_few_star_frames_searched_in_full_get_a_budget_of_hypotheses(default_set
         return real(self, obs_idx, cat_idx, **kw)
 
     monkeypatch.setattr(pipeline.Verifier, "check", check)
-    assert not solve(frame, p.camera, default_set_db, options=opts).solved
+    looped = solve(frame, p.camera, default_set_db, options=opts)
+    assert not looped.solved and not compiled.solved
     assert seen == []  # the first screen used up the budget before any check
+    assert compiled.message == looped.message  # the same count of hypotheses
 
 
 def test_a_4_star_frame_is_not_given_to_quad_and_says_why_on_the_default_database(default_set_db) -> None:

@@ -240,14 +240,8 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
                                                 trials, n_pat, False, marg_r[:0], marg_prob[:0],
                                                 marg_off[:1], empty, empty, marg_trials[:0], probes, cands)
                                     if n_marg < MAX_MARGINAL:
-                                        marg_r[n_marg] = r
-                                        marg_prob[n_marg] = prob
-                                        marg_trials[n_marg] = trials
-                                        k0 = marg_off[n_marg]
-                                        marg_obs[k0:k0 + len(m_obs)] = m_obs
-                                        marg_cat[k0:k0 + len(m_obs)] = m_cat
-                                        marg_off[n_marg + 1] = k0 + len(m_obs)
-                                        n_marg += 1
+                                        n_marg = keep_marginal(marg_r, marg_prob, marg_trials, marg_off, marg_obs,
+                                                               marg_cat, n_marg, r, prob, trials, m_obs, m_cat)
                                     if first_marg < 0:
                                         first_marg = n_pat
                         for i in range(6):  # next bin combination
@@ -265,6 +259,21 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
     return (status, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, exhausted and n_marg == 0,
             marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1], marg_obs[:marg_off[n_marg]],
             marg_cat[:marg_off[n_marg]], marg_trials[:n_marg], probes, cands)
+
+
+@njit(cache=True, nogil=True)
+def keep_marginal(marg_r, marg_prob, marg_trials, marg_off, marg_obs, marg_cat, n_marg, r, prob, trials, m_obs,
+                  m_cat):
+    """Store a marginal answer (attitude ``r``, bound ``prob`` after ``trials`` hypotheses, pairs
+    ``m_obs`` -> ``m_cat``) as answer ``n_marg`` of the ``marg_*`` arrays; returns the count."""
+    marg_r[n_marg] = r
+    marg_prob[n_marg] = prob
+    marg_trials[n_marg] = trials
+    k0 = marg_off[n_marg]
+    marg_obs[k0:k0 + len(m_obs)] = m_obs
+    marg_cat[k0:k0 + len(m_obs)] = m_cat
+    marg_off[n_marg + 1] = k0 + len(m_obs)
+    return n_marg + 1
 
 
 @njit(cache=True, nogil=True)

@@ -110,6 +110,14 @@ to 16,455 (p99 617; seed 000 at 2 px: up to 13 ms). Until session 13 the fallbac
 of the clock; a 3-ms clock budget tried here refused 2 frames of 47,500 it proves in 0.4-0.7
 ms when the machine stalled."""
 
+SMALL_FRAME_FALLBACK_FIRST = True
+"""On a frame of 5-7 stars (``quad.MIN_STARS`` to ``QUAD_REFUSE_STARS - 1``) that a member's
+``quad`` searched exhaustively without a proof, that member's first fallback runs before the
+next member's ``quad``: there ``quad``'s 4-star patterns with one more star rarely pass the bound
+(seed 002's 4096-px camera, 7 stars of which 2 false: the next member's ``quad`` proved none of
+443, at 0.087 ms a frame, and ``maxangle`` on the first member proved 422). Its hypotheses do not
+count against the fallbacks' ``FEW_STARS_MAX_TRIALS``."""
+
 SPARSE_PROOF_METHODS = frozenset({"triangle", "multifov"})
 """Methods that can prove a frame of fewer stars than the verifier's ``min_matches`` (4): the
 verifier needs a pair beyond the pattern, so only ``triangle``'s unique-triangle proof
@@ -209,8 +217,10 @@ def solve_rig(
     unprovable: list[str] = []  # methods skipped: no answer of theirs could pass the bound here
     search_deadline = deadline  # shortened after an exhaustive quad miss (EXHAUSTED_BUDGET_MS)
     trial_limit: int | None = None  # set after an exhaustive quad miss of 5-7 stars (FEW_STARS_MAX_TRIALS)
+    small = QUAD_MIN_STARS <= len(obs) < QUAD_REFUSE_STARS
     for sigma in sigmas:
-        for member, methods in plan:
+        order = list(plan)
+        for i, (member, methods) in enumerate(order):
             if misses and all(misses) and "quad" not in methods:
                 if QUAD_REFUSE_STARS <= len(obs) <= QUERY_STARS:
                     continue  # fast refusal: the fallbacks would search the same stars (see QUAD_REFUSE_STARS)
@@ -220,10 +230,15 @@ def solve_rig(
                 elif trial_limit is None:  # over every member's fallback (FEW_STARS_MAX_TRIALS)
                     trial_limit = trials + FEW_STARS_MAX_TRIALS
             db = member
+            before = trials
             found, used, trials = _identify(obs, db, methods, sigma, options, search_deadline, hint, trials, tried,
                                             misses, trial_limit, unprovable)
             if found is not None or time.perf_counter() > search_deadline:
                 break
+            if SMALL_FRAME_FALLBACK_FIRST and methods == ["quad"] and small and misses and all(misses):
+                if trial_limit is not None:
+                    trial_limit += trials - before  # the budget is the fallbacks' own (FEW_STARS_MAX_TRIALS)
+                _fallback_next(order, i)
         if found is not None or time.perf_counter() > search_deadline:
             break
     t2 = time.perf_counter()
@@ -236,6 +251,16 @@ def solve_rig(
         if refined is not None:
             db, found = deepest, refined
     return _stamped(_solution(obs, db, found, used, sigma * obs.pixel_scale_rad, options), tried, timings, t0, t2)
+
+
+def _fallback_next(order: list[tuple[NavDatabase, list[str]]], i: int) -> None:
+    """Move the fallback of ``order[i]``'s member to right after it, in place (see
+    :data:`SMALL_FRAME_FALLBACK_FIRST`)."""
+    member = order[i][0]
+    for j in range(i + 1, len(order)):
+        if order[j][0] is member:
+            order.insert(i + 1, order.pop(j))
+            return
 
 
 def _stamped(sol: Solution, tried: list[str], timings: dict[str, float], t0: float, t2: float) -> Solution:

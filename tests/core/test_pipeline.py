@@ -254,6 +254,40 @@ def test_few_star_frames_searched_in_full_get_a_budget_of_hypotheses(default_set
     assert compiled.message == looped.message  # the same count of hypotheses
 
 
+def test_a_small_frame_gets_the_first_members_fallback_before_the_next_members_quad(default_set_db,
+                                                                                   monkeypatch) -> None:
+    """SMALL_FRAME_FALLBACK_FIRST: a 7-star seed 002 frame with 2 false stars, which quad cannot
+    prove (4 + 1 stars do not pass the bound at 4096 px), is proven by the first member's maxangle
+    without the second member's quad; the answer is the one the plan's own order gives."""
+    import service.core.pipeline as pipeline
+    from service.core.methods.quad import QuadMatcher
+
+    p = PRESETS["seed002"]
+    opts = SolveOptions(centroid_sigma_px=1.0)
+    frames = [f for f in simulate_frames(p.camera, 300, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0,
+                                                                   false_stars=2), rng=12)
+              if len(f.centroids) == 7][:12]
+    searched: list[str] = []
+    real = QuadMatcher.search
+
+    def search(self, obs, v, tol_rad):
+        searched.append(self.db.path.name)
+        return real(self, obs, v, tol_rad)
+
+    monkeypatch.setattr(QuadMatcher, "search", search)
+    runs = {}
+    for first in (True, False):
+        monkeypatch.setattr(pipeline, "SMALL_FRAME_FALLBACK_FIRST", first)
+        searched.clear()
+        runs[first] = [solve(f.centroids, p.camera, default_set_db, options=opts) for f in frames]
+        runs[first, "quad"] = list(searched)
+    proven = sum(s.solved for s in runs[True])
+    assert proven >= 8
+    assert len(runs[True, "quad"]) <= len(frames) - proven < len(runs[False, "quad"])
+    for a, b in zip(runs[True], runs[False], strict=True):
+        assert (a.solved, [s[:2] for s in a.stars]) == (b.solved, [s[:2] for s in b.stars])
+
+
 def test_a_4_star_frame_is_not_given_to_quad_and_says_why_on_the_default_database(default_set_db) -> None:
     # seed 000's 1024-px camera: quad needs 5 stars and the triangle fallbacks cannot pass the
     # bound, so nothing runs; seed 002's 4096-px camera can prove 4 stars, so its fallbacks run

@@ -58,7 +58,7 @@ from bench.peers import cedar as cedar_mod
 from service.core.catalog import load_hipparcos, select_stars
 from service.core.methods import method_names
 from service.core.navdb import BuildConfig, build_database, open_database
-from service.core.pipeline import warm_up
+from service.core.warmup import warm_up
 
 REAL_FOV = (6.0, 26.0)
 """Horizontal fields of the real images: 6.07 deg (openstartracker) to 25.4 deg (img_7660)."""

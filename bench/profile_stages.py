@@ -21,6 +21,7 @@ from collections.abc import Callable, Sequence  # noqa: E402
 
 from service.core import pipeline  # noqa: E402
 from service.core.first_pass import first_pass  # noqa: E402
+from service.core.plan import search_plan  # noqa: E402
 from service.core.navdb import ensure_default_database, open_database  # noqa: E402
 from service.core.presets import PRESETS  # noqa: E402
 from service.core.refusal import refusal  # noqa: E402
@@ -49,14 +50,14 @@ def main(argv: Sequence[str] | None = None) -> None:
                                               false_stars=2), rng=5)[3]
     opts = pipeline.SolveOptions(centroid_sigma_px=args.noise)
     pipeline.solve(frame.centroids, cam, db, options=opts)  # warm-up, plans and caches
-    plan, deepest = pipeline._search_plan(db, [cam], "auto", args.noise)
+    plan, deepest = search_plan(db, [cam], "auto", args.noise)
     one = [(frame.centroids, cam, None)]
     obs = pipeline._observation(one, pipeline._ONE_CAMERA)
     fp = first_pass(obs, plan[0][0], deepest, args.noise, None, opts.max_false_prob)
     if not fp.solved:
         raise SystemExit("the first pass did not prove this frame; try another --camera or --noise")
     rows = [
-        ("search plan", lambda: pipeline._search_plan(db, [cam], "auto", args.noise)),
+        ("search plan", lambda: search_plan(db, [cam], "auto", args.noise)),
         ("refusal check", lambda: refusal(one, db, "auto", 0.0)),
         ("input to body vectors", lambda: pipeline._observation(one, pipeline._ONE_CAMERA).kernel_arrays),
         ("compiled first pass", lambda: first_pass(obs, plan[0][0], deepest, args.noise, None, opts.max_false_prob)),

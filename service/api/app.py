@@ -13,7 +13,8 @@ from fastapi import Depends, FastAPI
 
 from .. import __version__
 from ..core.navdb import ensure_default_database, open_database
-from ..core.pipeline import SolveOptions, warm_up
+from ..core.pipeline import SolveOptions
+from ..core.warmup import warm_up
 from . import errors, sessions, ui
 from .convert import camera_entry
 from .deps import require_api_key

@@ -38,7 +38,8 @@ def solve_frames(
 
     from ..core.batch import FrameError, SolvePool
     from ..core.navdb import open_database
-    from ..core.pipeline import SolveOptions, warm_up
+    from ..core.pipeline import SolveOptions
+    from ..core.warmup import warm_up
 
     database = open_database(resolve_db(db))
     warm_up(database)  # before the clock: frames/s below is of solving, not of starting

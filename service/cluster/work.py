@@ -43,7 +43,7 @@ class DatabasePlugin(WorkerPlugin):
 
     def setup(self, worker: Any) -> None:
         from service.core.navdb import open_database
-        from service.core.pipeline import warm_up
+        from service.core.warmup import warm_up
 
         where = self.path or "the default database"
         worker.skyfix_db = None  # a plugin registered again must not leave the previous database

@@ -1,6 +1,6 @@
 """The checks of a proven answer as one compiled call (one camera).
 
-What :func:`service.core.pipeline._solution` does to a verified identification before the final
+What :func:`service.core.finish.solution` does to a verified identification before the final
 fit, for a single camera: project the catalogue stars of the field under the answer's attitude,
 name the blobs of close doubles as their dominant star (:func:`~service.core.blends.dominant_kernel`),
 and drop the pairs whose observed star is far too bright for its catalogue star
@@ -136,7 +136,7 @@ def _member(rows: np.ndarray, of: np.ndarray) -> np.ndarray:
 def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, cell, n_side, keys, starts, stars,
                   columns, chord, mount, cam, dist, radius_px, sigma_px, hidden_sep, hidden_limits):
     """``(obs rows, catalogue rows, changed)`` of an answer after the checks of
-    :func:`service.core.pipeline._solution` (blends named, implausible pairs dropped; ``cam[0]``
+    :func:`service.core.finish.solution` (blends named, implausible pairs dropped; ``cam[0]``
     is the focal length, px, and ``hidden_sep, hidden_limits`` :func:`~service.core.hidden.hidden_neighbours`)."""
     r_cam = mount @ r
     rows, pxy = field_stars(r_cam, chord, cell, n_side, keys, starts, stars, columns, star_vec, cam, dist)

@@ -23,7 +23,8 @@ import orjson
 from .camera import Camera
 from .errors import InvalidInputError, SkyfixError
 from .navdb.reader import NavDatabase, NavDatabaseSet
-from .pipeline import DEFAULT_OPTIONS, SolveOptions, solve, solve_rig, warm_up
+from .pipeline import DEFAULT_OPTIONS, SolveOptions, solve, solve_rig
+from .warmup import warm_up
 from .types import Centroids, Solution
 
 

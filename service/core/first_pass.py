@@ -207,7 +207,7 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
     radius = match_radius_px or max(2.5, 3.0 * sigma_px)
     tol = (3.0 * math.sqrt(2.0) * sigma_px + 0.5) * scale
     sigma_rad = sigma_px * scale
-    answer_radius = match_radius_px or max(2.5, 3.0 * sigma_rad / scale)  # as pipeline._solution has it
+    answer_radius = match_radius_px or max(2.5, 3.0 * sigma_rad / scale)  # as finish.solution has it
     near_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
     field_deg = cam.diagonal_fov_deg / 2 + FIELD_MARGIN_DEG
     near_chord = 2 * math.sin(math.radians(near_deg) / 2)

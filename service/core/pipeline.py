@@ -15,27 +15,23 @@ from typing import Any
 
 import numpy as np
 
-from .answer import compiled_checks, pair_distances, recheck
-from .apparent import aberrate, apparent_directions
-from .attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix, radec_roll
-from .blends import dominant_pairs
+from .answer import recheck
+from .attitude import quat_to_matrix, radec_roll
 from .camera import Camera, brightest_first
-from .errors import InvalidInputError, UnknownMethodError
+from .errors import InvalidInputError
+from .finish import solution
 from .first_pass import deeper_arrays, first_pass
-from .hidden import hidden_kernel, hidden_neighbours
-from .match import CROWD, IDENTITY_MOUNTING
-from .methods import SolveContext, get_matcher, get_method, resolve
+from .match import IDENTITY_MOUNTING
+from .methods import SolveContext, get_matcher
 from .methods.quad import MIN_STARS as QUAD_MIN_STARS
 from .methods.quad import QUERY_STARS
 from .methods.quad_kernel import RECHECK_REACH, could_pair_more
 from .navdb.reader import NavDatabase, NavDatabaseSet
-from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted, too_bright
+from .plan import fallback_next, search_plan
 from .refusal import no_solution, refusal
-from .residuals import distant_pairs
-from .solution import answer, solution_of
-from .trimmed import trimmed_basin
-from .types import Centroids, Solution, SolveStatus
-from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier, field_grid, star_tree, star_vec64
+from .solution import solution_of
+from .types import Centroids, Solution
+from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier, field_grid, star_vec64
 
 Quaternion = Sequence[float]
 
@@ -183,7 +179,7 @@ def solve_rig(
         raise InvalidInputError("cameras", "at least one camera frame is required")
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
-    plan, deepest = _search_plan(db, [cam for _, cam, _ in frames], method, options.centroid_sigma_px)
+    plan, deepest = search_plan(db, [cam for _, cam, _ in frames], method, options.centroid_sigma_px)
     refused = refusal(frames, db, method, t0, options.centroid_sigma_px)
     if refused is not None:
         return refused
@@ -238,7 +234,7 @@ def solve_rig(
             if SMALL_FRAME_FALLBACK_FIRST and methods == ["quad"] and small and misses and all(misses):
                 if trial_limit is not None:
                     trial_limit += trials - before  # the budget is the fallbacks' own (FEW_STARS_MAX_TRIALS)
-                _fallback_next(order, i)
+                fallback_next(order, i)
         if found is not None or time.perf_counter() > search_deadline:
             break
     t2 = time.perf_counter()
@@ -250,17 +246,7 @@ def solve_rig(
         refined = _refine(obs, db, deepest, found, sigma, options)
         if refined is not None:
             db, found = deepest, refined
-    return _stamped(_solution(obs, db, found, used, sigma * obs.pixel_scale_rad, options), tried, timings, t0, t2)
-
-
-def _fallback_next(order: list[tuple[NavDatabase, list[str]]], i: int) -> None:
-    """Move the fallback of ``order[i]``'s member to right after it, in place (see
-    :data:`SMALL_FRAME_FALLBACK_FIRST`)."""
-    member = order[i][0]
-    for j in range(i + 1, len(order)):
-        if order[j][0] is member:
-            order.insert(i + 1, order.pop(j))
-            return
+    return _stamped(solution(obs, db, found, used, sigma * obs.pixel_scale_rad, options), tried, timings, t0, t2)
 
 
 def _stamped(sol: Solution, tried: list[str], timings: dict[str, float], t0: float, t2: float) -> Solution:
@@ -276,76 +262,6 @@ def _stamped(sol: Solution, tried: list[str], timings: dict[str, float], t0: flo
 _IDENTITY = IDENTITY_MOUNTING  # the one rig_arrays recognises
 
 _ONE_CAMERA = [_IDENTITY]
-
-
-PLAN_CACHE_SIZE = 256
-"""Search plans kept per opened database (one per camera geometry, method and sigma seen)."""
-
-
-def _search_plan(db: NavDatabase | NavDatabaseSet, cameras: list[Camera], method: str, sigma_px: float | None
-                 ) -> tuple[list[tuple[NavDatabase, list[str]]], NavDatabase]:
-    """The members and methods to search, in order (:func:`_plan`), and the member to refine an
-    answer against, for these cameras; kept per database, as every frame of a camera asks the
-    same (choosing them costs ~30 us a frame)."""
-    key = (method, sigma_px, tuple(cameras))  # cameras are hashable values: a camera's fields fix its plan
-    cache = db.__dict__.setdefault("_plans", {})
-    if key in cache:
-        return cache[key]
-    if isinstance(db, NavDatabaseSet):
-        widest = max(cameras, key=lambda c: c.diagonal_fov_deg)
-        fitting = db.for_camera(widest.fov_deg, widest.diagonal_fov_deg)
-        # search the shallowest fitting member first (bright stars: few, fast, robust; of equal
-        # depth the one made for the narrower range), then refine the answer against the
-        # deepest one (more stars, a better attitude)
-        members = sorted(fitting, key=lambda m: (m.mag_limit, m.max_fov_deg))
-        deepest = max(fitting, key=lambda m: (m.mag_limit, -m.max_fov_deg))
-        if method != "auto":  # a named method: the members that hold it (the set's `sparse` holds triangle)
-            holding = [m for m in members if method in m.tables]
-            if not holding:
-                get_method(method)  # an unregistered name: its own error
-                methods = sorted({name for m in members for name in m.methods})
-                raise UnknownMethodError(method, ["auto", *methods])
-            members = holding
-    else:
-        members, deepest = [db], db
-    fov = max(cam.fov_deg for cam in cameras)
-    method_lists = [resolve(m, method, fov_deg=fov, sigma_px=sigma_px) for m in members]
-    if method == "auto" and len(cameras) > 1:
-        method_lists = [_rig_methods(ms) for ms in method_lists]
-    elif method == "auto" and any(ms != [RIG_METHOD] for ms in method_lists):
-        # one camera: a member that holds the rig method alone (the default set's ``rig``) is
-        # left to rigs when another member serves the camera
-        method_lists = [[] if ms == [RIG_METHOD] else ms for ms in method_lists]
-    if len(cache) >= PLAN_CACHE_SIZE:
-        cache.clear()
-    cache[key] = (_plan(members, method_lists), deepest)
-    return cache[key]
-
-
-RIG_METHOD = "multifov"
-"""The method made for rigs (several cameras on one body): it identifies each camera's
-brightest star by votes within its own camera and joins the cameras through their known
-mountings, so it proves frames that no single camera could, e.g. (2, 2) or (1, 3) stars per
-camera (``python -m bench.bench_rig``)."""
-
-
-def _rig_methods(methods: list[str]) -> list[str]:
-    """``auto``'s methods of one member for a rig frame: :data:`RIG_METHOD` right after the
-    first (fast) method, so that it is the fallback that runs when the first pass misses."""
-    if RIG_METHOD not in methods:
-        return methods
-    rest = [m for m in methods if m != RIG_METHOD]
-    return [rest[0], RIG_METHOD, *rest[1:]] if rest else [RIG_METHOD]
-
-
-def _plan(members: list[NavDatabase], method_lists: list[list[str]]) -> list[tuple[NavDatabase, list[str]]]:
-    """The order of the search over a database set: every member's first method (the fast
-    pass) before any member's fallbacks, so a frame that the first method of the second member
-    solves does not wait for the first member's slow fallbacks, and a frame no one solves
-    spends its fallback time only once the fast passes have all failed."""
-    first = [(m, ms[:1]) for m, ms in zip(members, method_lists, strict=True) if ms]
-    rest = [(m, ms[1:]) for m, ms in zip(members, method_lists, strict=True) if len(ms) > 1]
-    return first + rest
 
 
 def _refine(
@@ -475,137 +391,6 @@ def _near_hint(r: np.ndarray, hint: tuple[Quaternion, float]) -> bool:
     return math.degrees(math.acos(cosang)) <= radius_deg
 
 
-def _apparent(db: NavDatabase, cat: np.ndarray, options: SolveOptions) -> tuple[np.ndarray, np.ndarray]:
-    """Directions of catalogue rows ``cat``: astrometric at the frame's epoch (reported per
-    star) and apparent (also aberrated; what the attitude is fitted to)."""
-    ref = np.asarray(db.stars.vec[cat])
-    dt = 0.0 if options.epoch is None else options.epoch - db.epoch
-    if dt != 0.0 and db.stars.pm is not None:
-        ref = apparent_directions(ref, pm_mas_yr=np.asarray(db.stars.pm[cat]), dt_years=dt)
-    seen = ref if options.observer_velocity_km_s is None else aberrate(ref, np.asarray(options.observer_velocity_km_s))
-    return ref, seen
-
-
-FieldStars = list[tuple[np.ndarray, np.ndarray]]
-"""Per camera: the catalogue rows predicted inside its image, and their pixel positions."""
-
-
-def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: FieldStars, radius_px: float,
-                       sigma_px: float = 0.0) -> np.ndarray:
-    """Pairs whose observed star is far brighter than its catalogue star, whose catalogue star
-    is fainter than the frame's completeness (see :mod:`service.core.photometry`), that lie
-    too far from it for the frame's noise (:mod:`service.core.residuals`), or near a star the
-    member left out (:mod:`service.core.hidden`)."""
-    pair_mag = np.asarray(db.stars.mag[v.cat], dtype=np.float64)
-    d = np.full(len(v.obs), np.nan)
-    for c, (rows, pxy) in enumerate(field):
-        mine = np.flatnonzero(obs.camera[v.obs] == c)
-        if len(mine) and len(rows):
-            d[mine] = pair_distances(obs.xy, v.obs[mine], v.cat[mine], rows, pxy)
-    bad = distant_pairs(d, pair_mag, sigma_px)
-    hidden, limits = hidden_neighbours(db)
-    for c, cam in enumerate(obs.cameras):
-        mine = np.flatnonzero(obs.camera[v.obs] == c)
-        bad[mine] |= hidden_kernel(v.cat[mine], d[mine], pair_mag[mine], hidden, limits, cam.pixel_scale_rad,
-                                   CROWD * radius_px)
-    if obs.flux is not None:
-        bad |= too_bright(obs.flux[v.obs], pair_mag) | faintest_inverted(obs.flux[v.obs], pair_mag)
-    if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
-        rows = np.unique(np.concatenate([r for r, _ in field])) if field else np.zeros(0, np.int64)
-        bad |= beyond_completeness(pair_mag, db.stars.mag[rows], _member(rows, v.cat))
-    return bad
-
-
-def _member(rows: np.ndarray, of: np.ndarray) -> np.ndarray:
-    """``np.isin(rows, of)`` for the few dozen rows of a frame (a set: ~10x faster here)."""
-    s = set(of.tolist())
-    return np.fromiter((r in s for r in rows.tolist()), dtype=bool, count=len(rows))
-
-
-def _blend_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: float,
-                 field: FieldStars) -> Verified | None:
-    """``v`` with the blobs of close doubles named as their dominant star (see
-    :mod:`service.core.blends`), or None when there are none."""
-    free = np.ones(len(obs), dtype=bool)
-    free[v.obs] = False
-    if not free.any():
-        return None
-    add_o, add_c = [], []
-    faintest = float(np.max(db.stars.mag[v.cat]))
-    for c, (rows, pxy) in enumerate(field):
-        mine = np.flatnonzero((obs.camera == c) & free)
-        unpaired = ~_member(rows, v.cat)
-        if len(mine) == 0 or not unpaired.any():
-            continue
-        cand, cxy = rows[unpaired], pxy[unpaired]
-        mag = np.asarray(db.stars.mag[cand], np.float64)
-        # a blob is as bright as the stars already named, not a faint catalogue star's neighbour
-        o, p = dominant_pairs(obs.xy, mine, cxy, mag, mag <= faintest + 0.5, radius_px)
-        add_o.append(o)
-        add_c.append(cand[p])
-    if not add_o or sum(len(o) for o in add_o) == 0:
-        return None
-    return Verified(np.concatenate([v.obs, *add_o]), np.concatenate([v.cat, *add_c]), v.matrix, v.false_prob,
-                    v.n_trials)
-
-
-def _stars_in_field(obs: Observation, db: NavDatabase, r_body: np.ndarray) -> FieldStars:
-    """Per camera, the catalogue rows predicted inside its image under the ICRS -> body
-    ``r_body``, with their pixel positions."""
-    tree = star_tree(db)
-    out: FieldStars = []
-    for cam, mount in zip(obs.cameras, obs.mountings, strict=True):
-        r_cam = mount @ r_body
-        half = math.radians(cam.diagonal_fov_deg / 2 + 0.1)
-        near = np.asarray(tree.query_ball_point(r_cam[2], 2 * math.sin(half / 2)), dtype=np.int64)
-        if len(near):
-            pxy, inside = cam.vector_to_pixel(np.asarray(db.stars.vec[near]) @ r_cam.T)
-            out.append((near[inside], pxy[inside]))
-        else:
-            out.append((near, np.zeros((0, 2))))
-    return out
-
-
-def checked_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: float,
-                  sigma_px: float = 0.0) -> tuple[Verified, bool]:
-    """``v`` after the checks of a proven answer, and whether its pairs changed: the blobs of
-    close doubles named as their dominant star, then the implausible pairs dropped (far too
-    bright for their catalogue star, or fainter than the frame's completeness). Any number of
-    cameras; :func:`service.core.answer.compiled_checks` is the same for one camera, compiled."""
-    moved = False
-    field = _stars_in_field(obs, db, v.matrix)
-    blended = _blend_pairs(obs, db, v, radius_px, field)
-    if blended is not None:
-        v, moved = blended, True
-    implausible = _implausible_pairs(obs, db, v, field, radius_px, sigma_px)  # also judges the blends just named
-    if implausible.any():  # false detections paired with faint catalogue stars by position alone
-        v = Verified(v.obs[~implausible], v.cat[~implausible], v.matrix, v.false_prob, v.n_trials)
-        moved = True
-    return v, moved
-
-
-def _solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_rad: float,
-              options: SolveOptions = DEFAULT_OPTIONS) -> Solution:
-    moved = options.epoch is not None or options.observer_velocity_km_s is not None
-    radius = options.match_radius_px or max(2.5, 3.0 * sigma_rad / obs.pixel_scale_rad)
-    sigma_px = sigma_rad / obs.pixel_scale_rad
-    trimmed = trimmed_basin(obs, db, v, radius, sigma_px)  # a fit pulled off by a few wrong pairs
-    if trimmed is not None:
-        v, moved = trimmed, True
-    checked = compiled_checks(obs, db, v.obs, v.cat, v.matrix, radius, sigma_px)  # one camera: compiled
-    if checked is None:
-        v, changed = checked_pairs(obs, db, v, radius, sigma_px)
-    else:
-        changed = checked[2]
-        if changed:
-            v = Verified(checked[0], checked[1], v.matrix, v.false_prob, v.n_trials)
-    moved = moved or changed
-    ref, seen = _apparent(db, v.cat, options)
-    fit = estimate(obs.vec[v.obs], seen, matrix=None if moved else v.matrix, prior_sigma_rad=sigma_rad)
-    return answer(obs, db, v.obs, v.cat, ref, fit.matrix, fit.residuals_arcsec, fit.rms_arcsec, fit.sigma_arcsec,
-                   v.false_prob, method)
-
-
 def solve_image(
     image: np.ndarray,
     camera: Camera,
@@ -664,90 +449,25 @@ def tan_wcs(r: np.ndarray, camera: Camera) -> dict[str, Any]:
 
 
 def _ensure_warm(db: NavDatabase | NavDatabaseSet) -> None:
-    """:func:`warm_up` ``db`` once (the first solve on a freshly opened database would
-    otherwise spend its time limit loading compiled kernels and building indexes)."""
+    """:func:`~service.core.warmup.warm_up` ``db`` once (the first solve on a freshly opened
+    database would otherwise spend its time limit loading compiled kernels and building indexes)."""
     if not db.__dict__.get("_warm"):
+        from .warmup import warm_up  # (warmup solves through this module)
+
         warm_up(db)  # marks ``db`` (and a set's members) warm before its own solves
 
 
-def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
-    """Build every matcher, the star k-d tree and sky grid of ``db`` (or of each member of a
-    set), and solve one frame of its own stars with each method, so that numba's kernels are
-    compiled (or loaded from its on-disk cache) and the first request of a server worker is
-    as fast as the rest."""
-    from .verify import sky_grid, star_tree
+def __getattr__(name: str) -> Any:
+    """``warm_up``, which lives in :mod:`service.core.warmup` (it solves through this module),
+    is still importable from here."""
+    if name == "warm_up":
+        from .warmup import warm_up
 
-    db.__dict__["_warm"] = True
-    members = db.members.values() if isinstance(db, NavDatabaseSet) else [db]
-    for member in members:
-        member.__dict__["_warm"] = True
-        star_tree(member)
-        sky_grid(member)
-        camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
-        for name in member.methods:
-            get_matcher(member, name)
-            if name == "multifov":
-                continue  # a rig method; its kernels are the verifier's, warmed by the others
-            for centroids in _own_frames(member, camera):
-                if solve(centroids, camera, member, method=name).status is SolveStatus.SOLVED:
-                    break
-    # auto as users call it, on the whole database: the compiled first pass, the kernels of
-    # frames of 4 and 3 stars (the screen of a 4-star triangle, the sparse proof) and of a frame
-    # the first pass cannot prove (quad's search on the other members, the fallback). Without
-    # these the first such requests compiled them on a fresh install: 4 s, 0.7 s, 1.7 s and 3 s,
-    # past the 500 ms time limit.
-    rng = np.random.default_rng(0)
-    for member in members:
-        camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
-        frame = _own_frames(member, camera, n_tries=1)[0]
-        for n in (len(frame), 4, 3):
-            solve(Centroids(frame.xy[:n], frame.flux[:n]), camera, db)
-        solve(Centroids(rng.uniform(0, 1023, (12, 2)), rng.uniform(1, 100, 12)), camera, db)
-    # rigs: the rig method's own kernels (its master votes, the cross-camera proof of a sparse
-    # frame) on a frame of a member's stars dealt out to two cameras of one pointing
-    for member in members:
-        if RIG_METHOD in member.methods:
-            camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
-            frame = _own_frames(member, camera, n_tries=1)[0]
-            ident = (1.0, 0.0, 0.0, 0.0)
-            for n in (len(frame), 4):
-                halves = [Centroids(frame.xy[k:n:2], frame.flux[k:n:2]) for k in (0, 1)]
-                solve_rig([(h, camera, ident) for h in halves], db)
-    # the unique-triangle proof's box screens, which only a frame whose match proves locally
-    # reaches: called directly on a member's own 3- and 4-star frame (a first use compiled
-    # them inside a request: ~0.7-1 s)
-    from .sparse_proof import warm_up_screens
-
-    for member in members:
-        camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
-        frame = _own_frames(member, camera, n_tries=1)[0]
-        warm_up_screens(member, camera, frame)
-        # the deeper recheck's screen (_could_pair_more), which only an answer found past the
-        # first pass reaches (its first use in a request loaded it from numba's cache)
-        _could_pair_more(_observation([(frame, camera, None)], _ONE_CAMERA), member,
-                         Verified(np.zeros(0, np.int64), np.zeros(0, np.int64), np.eye(3), 1.0, 0), 2.5)
+        return warm_up
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centroids]:
-    """Noise-free frames of ``db``'s own brightest stars around a few of them (for
-    :func:`warm_up`)."""
-    from .attitude import matrix_from_radec_roll
-    from .verify import star_tree
-
-    stars = db.stars
-    mag = np.asarray(stars.mag, dtype=np.float64)
-    frames = []
-    for row in np.argsort(mag)[: 50 : 50 // n_tries]:
-        v = np.asarray(stars.vec[row], dtype=np.float64)
-        ra = math.degrees(math.atan2(v[1], v[0])) % 360
-        dec = math.degrees(math.asin(max(-1.0, min(1.0, v[2]))))
-        r = matrix_from_radec_roll(ra, dec, 0.0)
-        near = np.asarray(star_tree(db).query_ball_point(v, math.radians(camera.diagonal_fov_deg)), dtype=np.int64)
-        xy, inside = camera.vector_to_pixel(np.asarray(stars.vec[near]) @ r.T)
-        near, xy = near[inside], xy[inside]
-        order = np.argsort(mag[near])[:20]
-        frames.append(Centroids(xy[order], 10.0 ** (-0.4 * mag[near][order])))
-    return frames
+__all__ = ["DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_image", "solve_rig", "tan_wcs", "warm_up"]
 
 
-__all__ = ["ARCSEC_PER_RAD", "DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_image", "solve_rig", "tan_wcs", "warm_up"]
+

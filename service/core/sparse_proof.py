@@ -230,7 +230,7 @@ def _star_in_view(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> Int
 
 def warm_up_screens(db: NavDatabase, camera: Camera, frame: Centroids) -> None:
     """Compile (or load) the box screens' kernels on ``db``: each screen of ``frame``'s first
-    3 and 4 stars against a few catalogue triples (see ``pipeline.warm_up``)."""
+    3 and 4 stars against a few catalogue triples (see :func:`~service.core.warmup.warm_up`)."""
     from .pipeline import _observation  # (the pipeline imports this module)
 
     triples = np.arange(6, dtype=np.int64).reshape(2, 3) % max(len(db.stars), 1)

@@ -7,7 +7,8 @@ import pytest
 
 from service.core.answer import compiled_checks, recheck
 from service.core.navdb import NavDatabase
-from service.core.pipeline import _observation, _stars_in_field, checked_pairs
+from service.core.finish import checked_pairs
+from service.core.pipeline import _observation
 from service.core.sim import SimConfig, simulate_frames
 from service.core.verify import Verified, Verifier
 from tests.conftest import SEED000_CAMERA

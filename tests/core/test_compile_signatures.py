@@ -32,7 +32,8 @@ SCRIPT = f"""
 import importlib, json
 import numpy as np
 from service.core.navdb import ensure_default_database, open_database
-from service.core.pipeline import SolveOptions, solve, warm_up
+from service.core.pipeline import SolveOptions, solve
+from service.core.warmup import warm_up
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, random_points, simulate_frames
 

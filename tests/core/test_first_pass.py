@@ -10,7 +10,8 @@ import pytest
 from service.core import pipeline
 from service.core.answer import recheck
 from service.core.first_pass import deeper_arrays, first_pass
-from service.core.pipeline import SolveOptions, _observation, _search_plan, solve
+from service.core.pipeline import SolveOptions, _observation, solve
+from service.core.plan import search_plan
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, simulate_frames
 from service.core.types import Centroids
@@ -33,7 +34,7 @@ def test_the_compiled_first_pass_answers_as_the_general_path(monkeypatch, defaul
     config = SimConfig(mag_limit=p.mag_limit, centroid_noise_px=noise, false_stars=2, mag_noise=0.3)
     frames = simulate_frames(p.camera, 40, config, rng=31)
     options = SolveOptions(centroid_sigma_px=noise)
-    plan, deepest = _search_plan(default_set_db, [p.camera], "auto", noise)
+    plan, deepest = search_plan(default_set_db, [p.camera], "auto", noise)
     proved = 0
     for frame in frames:
         fused, general = _both(monkeypatch, frame.centroids, p.camera, default_set_db, options)
@@ -72,7 +73,7 @@ def test_the_deeper_recheck_is_skipped_only_where_it_could_not_name_more_stars(d
     p = PRESETS["seed000"]
     frames = simulate_frames(p.camera, 80, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0, false_stars=2),
                              rng=32)
-    plan, deepest = _search_plan(default_set_db, [p.camera], "auto", 1.0)
+    plan, deepest = search_plan(default_set_db, [p.camera], "auto", 1.0)
     member = plan[0][0]
     assert member is not deepest
     radius = 3.0

@@ -173,39 +173,6 @@ def test_a_named_method_searches_the_members_that_hold_it(default_set_db) -> Non
     assert "triangle" not in err.value.known and "quad" in err.value.known
 
 
-def _compiled_signatures() -> dict[str, int]:
-    import sys
-
-    from numba.core.registry import CPUDispatcher
-
-    return {f"{name}.{key}": len(value.overloads) for name, module in list(sys.modules.items())
-            if name.startswith("service.") for key, value in list(vars(module).items())
-            if isinstance(value, CPUDispatcher)}
-
-
-def test_after_warm_up_auto_compiles_nothing_more(default_set_db) -> None:
-    """warm_up leaves no kernel for auto's first requests to compile (each took 0.7-4 s on a
-    fresh install, past the time limit): the compiled first pass, frames of 4 and 3 stars, and
-    frames the first pass cannot prove. Run alone, on an empty numba cache, this is what fails
-    when warm_up misses one; in a session where other tests compiled them it passes anyway."""
-    from service.core import pipeline
-
-    pipeline.warm_up(default_set_db)
-    before = _compiled_signatures()
-    rng = np.random.default_rng(3)
-    for key in ("seed000", "seed002", "seed004"):
-        p = PRESETS[key]
-        frames = [f.centroids for f in simulate_frames(p.camera, 6, SimConfig(mag_limit=p.mag_limit,
-                                                                              centroid_noise_px=1.0,
-                                                                              false_stars=2), rng=2)]
-        frames += [Centroids(f.xy[:n], f.flux[:n]) for f in frames[:1] for n in (3, 4, 6)]
-        frames += [random_points(p.camera, n, rng) for n in (5, 12, 30)]
-        for centroids in frames:
-            solve(centroids, p.camera, default_set_db, options=SolveOptions(centroid_sigma_px=1.0))
-    after = _compiled_signatures()
-    assert {k: v for k, v in after.items() if v != before.get(k)} == {}
-
-
 def test_a_frame_no_answer_could_pass_skips_the_triangle_fallbacks(seed000_db, monkeypatch) -> None:
     """``maxangle`` and ``pyramid`` prove a triangle by the stars beyond it; a 4-star frame of
     this 1024-px camera could not pass the bound even with every star paired

@@ -1,5 +1,5 @@
 """``auto`` on a rig over the default database: the rig method after the first pass, never on
-one camera (service.core.pipeline.RIG_METHOD, the default set's ``rig`` member)."""
+one camera (service.core.plan.RIG_METHOD, the default set's ``rig`` member)."""
 
 from __future__ import annotations
 
@@ -7,16 +7,17 @@ import pytest
 
 from service.core.evaluate import score
 from service.core.navdb import NavDatabaseSet
-from service.core.pipeline import RIG_METHOD, SolveOptions, _rig_methods, _search_plan, solve, solve_rig
+from service.core.pipeline import SolveOptions, solve, solve_rig
+from service.core.plan import RIG_METHOD, rig_methods, search_plan
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, simulate_frames
 from service.core.sim_rig import gf7_rig, simulate_rig_frames
 
 
 def test_the_rig_method_follows_the_first_pass_on_a_rig() -> None:
-    assert _rig_methods(["quad", "maxangle", "multifov", "pyramid"]) == ["quad", "multifov", "maxangle", "pyramid"]
-    assert _rig_methods(["multifov"]) == ["multifov"]
-    assert _rig_methods(["quad", "pyramid"]) == ["quad", "pyramid"]
+    assert rig_methods(["quad", "maxangle", "multifov", "pyramid"]) == ["quad", "multifov", "maxangle", "pyramid"]
+    assert rig_methods(["multifov"]) == ["multifov"]
+    assert rig_methods(["quad", "pyramid"]) == ["quad", "pyramid"]
 
 
 def test_one_camera_keeps_the_rig_method_where_nothing_else_serves(tmp_path) -> None:
@@ -28,20 +29,20 @@ def test_one_camera_keeps_the_rig_method_where_nothing_else_serves(tmp_path) -> 
     cam = PRESETS["seed001"].camera
     only = open_database(build_database(tmp_path / "only", BuildConfig(
         fov_min_deg=8.0, fov_max_deg=13.0, mag_limit=5.0, methods=("multifov",))))
-    plan, _ = _search_plan(only, [cam], "auto", 0.5)
+    plan, _ = search_plan(only, [cam], "auto", 0.5)
     assert [methods for _, methods in plan] == [["multifov"]]
     both = open_database(build_database(tmp_path / "both", BuildConfig(
         fov_min_deg=8.0, fov_max_deg=13.0, mag_limit=5.0, methods=("quad", "multifov"))))
-    plan, _ = _search_plan(both, [cam], "auto", 0.5)
+    plan, _ = search_plan(both, [cam], "auto", 0.5)
     assert [m for _, methods in plan for m in methods] == ["quad", "multifov"]
 
 
 def test_the_default_set_searches_its_rig_member_for_rigs_only(default_set_db: NavDatabaseSet) -> None:
     rig = gf7_rig()
     cameras = list(rig.cameras)
-    plan, _ = _search_plan(default_set_db, cameras, "auto", 0.5)
+    plan, _ = search_plan(default_set_db, cameras, "auto", 0.5)
     assert any(RIG_METHOD in methods for _, methods in plan)
-    one, _ = _search_plan(default_set_db, cameras[:1], "auto", 0.5)
+    one, _ = search_plan(default_set_db, cameras[:1], "auto", 0.5)
     assert all(RIG_METHOD not in methods and methods for _, methods in one)
     assert default_set_db.members["rig"] not in [m for m, _ in one]
     # one camera: the same answer as the set without its rig member would give

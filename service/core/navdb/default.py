@@ -59,7 +59,7 @@ of 3 stars 0/37 -> 32/37, of 4 stars 1/44 -> 41/44 (a database built for the cam
 ``rig`` serves rigs only (several cameras on one body, ``solve_rig``): ``multifov`` for cameras of
 7 deg side to 13 deg diagonal at V <= 6.5 (the pair table and its index: ~1.5 s of the build and
 6 MB). ``auto`` runs it on a rig after the first pass; for one camera it searches the other
-members only (``pipeline.RIG_METHOD``). Without it, seed 001's rig (GF-7's two 8.9-deg cameras, whose 12.6-deg
+members only (``plan.RIG_METHOD``). Without it, seed 001's rig (GF-7's two 8.9-deg cameras, whose 12.6-deg
 diagonal only the deep ``narrow`` member serves) identified 93.3% of frames with 4 or more stars;
 with it 99.7-99.8% (990-991 of 993 in repeated runs), 0 wrong (``python -m bench.bench_rig --frames 1000 --mag-limit 5.5 --noise 0.5``)."""
 

@@ -1,0 +1,168 @@
+"""From a verified identification to the answer, on the general path (any number of cameras).
+
+``auto``'s first pass does these steps compiled for one camera (:mod:`service.core.first_pass`);
+an answer found anywhere else comes here (:func:`solution`): a fit pulled off by a few wrong
+pairs is trimmed (:mod:`service.core.trimmed`), the blobs of close doubles are named and the
+implausible pairs dropped (:func:`checked_pairs`; :func:`service.core.answer.compiled_checks`
+for one camera), the catalogue's directions are moved to the frame's epoch and aberrated, and
+the attitude is fitted to them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .answer import compiled_checks, pair_distances
+from .apparent import aberrate, apparent_directions
+from .attitude import estimate
+from .blends import dominant_pairs
+from .hidden import hidden_kernel, hidden_neighbours
+from .match import CROWD
+from .navdb.reader import NavDatabase
+from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted, too_bright
+from .residuals import distant_pairs
+from .solution import answer
+from .trimmed import trimmed_basin
+from .types import Solution
+from .verify import Observation, Verified, star_tree
+
+if TYPE_CHECKING:
+    from .pipeline import SolveOptions
+
+
+def apparent(db: NavDatabase, cat: np.ndarray, options: SolveOptions) -> tuple[np.ndarray, np.ndarray]:
+    """Directions of catalogue rows ``cat``: astrometric at the frame's epoch (reported per
+    star) and apparent (also aberrated; what the attitude is fitted to)."""
+    ref = np.asarray(db.stars.vec[cat])
+    dt = 0.0 if options.epoch is None else options.epoch - db.epoch
+    if dt != 0.0 and db.stars.pm is not None:
+        ref = apparent_directions(ref, pm_mas_yr=np.asarray(db.stars.pm[cat]), dt_years=dt)
+    seen = ref if options.observer_velocity_km_s is None else aberrate(ref, np.asarray(options.observer_velocity_km_s))
+    return ref, seen
+
+
+FieldStars = list[tuple[np.ndarray, np.ndarray]]
+"""Per camera: the catalogue rows predicted inside its image, and their pixel positions."""
+
+
+def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: FieldStars, radius_px: float,
+                       sigma_px: float = 0.0) -> np.ndarray:
+    """Pairs whose observed star is far brighter than its catalogue star, whose catalogue star
+    is fainter than the frame's completeness (see :mod:`service.core.photometry`), that lie
+    too far from it for the frame's noise (:mod:`service.core.residuals`), or near a star the
+    member left out (:mod:`service.core.hidden`)."""
+    pair_mag = np.asarray(db.stars.mag[v.cat], dtype=np.float64)
+    d = np.full(len(v.obs), np.nan)
+    for c, (rows, pxy) in enumerate(field):
+        mine = np.flatnonzero(obs.camera[v.obs] == c)
+        if len(mine) and len(rows):
+            d[mine] = pair_distances(obs.xy, v.obs[mine], v.cat[mine], rows, pxy)
+    bad = distant_pairs(d, pair_mag, sigma_px)
+    hidden, limits = hidden_neighbours(db)
+    for c, cam in enumerate(obs.cameras):
+        mine = np.flatnonzero(obs.camera[v.obs] == c)
+        bad[mine] |= hidden_kernel(v.cat[mine], d[mine], pair_mag[mine], hidden, limits, cam.pixel_scale_rad,
+                                   CROWD * radius_px)
+    if obs.flux is not None:
+        bad |= too_bright(obs.flux[v.obs], pair_mag) | faintest_inverted(obs.flux[v.obs], pair_mag)
+    if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
+        rows = np.unique(np.concatenate([r for r, _ in field])) if field else np.zeros(0, np.int64)
+        bad |= beyond_completeness(pair_mag, db.stars.mag[rows], _member(rows, v.cat))
+    return bad
+
+
+def _member(rows: np.ndarray, of: np.ndarray) -> np.ndarray:
+    """``np.isin(rows, of)`` for the few dozen rows of a frame (a set: ~10x faster here)."""
+    s = set(of.tolist())
+    return np.fromiter((r in s for r in rows.tolist()), dtype=bool, count=len(rows))
+
+
+def _blend_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: float,
+                 field: FieldStars) -> Verified | None:
+    """``v`` with the blobs of close doubles named as their dominant star (see
+    :mod:`service.core.blends`), or None when there are none."""
+    free = np.ones(len(obs), dtype=bool)
+    free[v.obs] = False
+    if not free.any():
+        return None
+    add_o, add_c = [], []
+    faintest = float(np.max(db.stars.mag[v.cat]))
+    for c, (rows, pxy) in enumerate(field):
+        mine = np.flatnonzero((obs.camera == c) & free)
+        unpaired = ~_member(rows, v.cat)
+        if len(mine) == 0 or not unpaired.any():
+            continue
+        cand, cxy = rows[unpaired], pxy[unpaired]
+        mag = np.asarray(db.stars.mag[cand], np.float64)
+        # a blob is as bright as the stars already named, not a faint catalogue star's neighbour
+        o, p = dominant_pairs(obs.xy, mine, cxy, mag, mag <= faintest + 0.5, radius_px)
+        add_o.append(o)
+        add_c.append(cand[p])
+    if not add_o or sum(len(o) for o in add_o) == 0:
+        return None
+    return Verified(np.concatenate([v.obs, *add_o]), np.concatenate([v.cat, *add_c]), v.matrix, v.false_prob,
+                    v.n_trials)
+
+
+def stars_in_field(obs: Observation, db: NavDatabase, r_body: np.ndarray) -> FieldStars:
+    """Per camera, the catalogue rows predicted inside its image under the ICRS -> body
+    ``r_body``, with their pixel positions."""
+    tree = star_tree(db)
+    out: FieldStars = []
+    for cam, mount in zip(obs.cameras, obs.mountings, strict=True):
+        r_cam = mount @ r_body
+        half = math.radians(cam.diagonal_fov_deg / 2 + 0.1)
+        near = np.asarray(tree.query_ball_point(r_cam[2], 2 * math.sin(half / 2)), dtype=np.int64)
+        if len(near):
+            pxy, inside = cam.vector_to_pixel(np.asarray(db.stars.vec[near]) @ r_cam.T)
+            out.append((near[inside], pxy[inside]))
+        else:
+            out.append((near, np.zeros((0, 2))))
+    return out
+
+
+def checked_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: float,
+                  sigma_px: float = 0.0) -> tuple[Verified, bool]:
+    """``v`` after the checks of a proven answer, and whether its pairs changed: the blobs of
+    close doubles named as their dominant star, then the implausible pairs dropped (far too
+    bright for their catalogue star, or fainter than the frame's completeness). Any number of
+    cameras; :func:`service.core.answer.compiled_checks` is the same for one camera, compiled."""
+    moved = False
+    field = stars_in_field(obs, db, v.matrix)
+    blended = _blend_pairs(obs, db, v, radius_px, field)
+    if blended is not None:
+        v, moved = blended, True
+    implausible = _implausible_pairs(obs, db, v, field, radius_px, sigma_px)  # also judges the blends just named
+    if implausible.any():  # false detections paired with faint catalogue stars by position alone
+        v = Verified(v.obs[~implausible], v.cat[~implausible], v.matrix, v.false_prob, v.n_trials)
+        moved = True
+    return v, moved
+
+
+def solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_rad: float,
+              options: SolveOptions) -> Solution:
+    """The answer of the verified identification ``v`` (found by ``method``; ``sigma_rad`` the
+    declared centroid error): a fit pulled off by a few wrong pairs trimmed, the pairs checked
+    (:func:`checked_pairs`, compiled for one camera), the catalogue's directions made apparent
+    (epoch, aberration) and the attitude fitted to them."""
+    moved = options.epoch is not None or options.observer_velocity_km_s is not None
+    radius = options.match_radius_px or max(2.5, 3.0 * sigma_rad / obs.pixel_scale_rad)
+    sigma_px = sigma_rad / obs.pixel_scale_rad
+    trimmed = trimmed_basin(obs, db, v, radius, sigma_px)  # a fit pulled off by a few wrong pairs
+    if trimmed is not None:
+        v, moved = trimmed, True
+    checked = compiled_checks(obs, db, v.obs, v.cat, v.matrix, radius, sigma_px)  # one camera: compiled
+    if checked is None:
+        v, changed = checked_pairs(obs, db, v, radius, sigma_px)
+    else:
+        changed = checked[2]
+        if changed:
+            v = Verified(checked[0], checked[1], v.matrix, v.false_prob, v.n_trials)
+    moved = moved or changed
+    ref, seen = apparent(db, v.cat, options)
+    fit = estimate(obs.vec[v.obs], seen, matrix=None if moved else v.matrix, prior_sigma_rad=sigma_rad)
+    return answer(obs, db, v.obs, v.cat, ref, fit.matrix, fit.residuals_arcsec, fit.rms_arcsec, fit.sigma_arcsec,
+                   v.false_prob, method)

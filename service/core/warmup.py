@@ -1,0 +1,93 @@
+"""Warming a database up: every matcher built, every kernel compiled (or loaded from numba's
+cache) and the indexes made, before the first request (``skyfix serve``, ``skyfix solve``, the
+batch and cluster workers; :func:`service.core.pipeline.solve` warms a database it meets cold)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .attitude import matrix_from_radec_roll
+from .camera import Camera
+from .methods import get_matcher
+from .navdb.reader import NavDatabase, NavDatabaseSet
+from .pipeline import _ONE_CAMERA, _could_pair_more, _observation, solve, solve_rig
+from .plan import RIG_METHOD
+from .sparse_proof import warm_up_screens
+from .types import Centroids, SolveStatus
+from .verify import Verified, sky_grid, star_tree
+
+
+def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
+    """Build every matcher, the star k-d tree and sky grid of ``db`` (or of each member of a
+    set), and solve one frame of its own stars with each method, so that numba's kernels are
+    compiled (or loaded from its on-disk cache) and the first request of a server worker is
+    as fast as the rest."""
+    db.__dict__["_warm"] = True
+    members = db.members.values() if isinstance(db, NavDatabaseSet) else [db]
+    for member in members:
+        member.__dict__["_warm"] = True
+        star_tree(member)
+        sky_grid(member)
+        camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
+        for name in member.methods:
+            get_matcher(member, name)
+            if name == "multifov":
+                continue  # a rig method; its kernels are the verifier's, warmed by the others
+            for centroids in own_frames(member, camera):
+                if solve(centroids, camera, member, method=name).status is SolveStatus.SOLVED:
+                    break
+    # auto as users call it, on the whole database: the compiled first pass, the kernels of
+    # frames of 4 and 3 stars (the screen of a 4-star triangle, the sparse proof) and of a frame
+    # the first pass cannot prove (quad's search on the other members, the fallback). Without
+    # these the first such requests compiled them on a fresh install: 4 s, 0.7 s, 1.7 s and 3 s,
+    # past the 500 ms time limit.
+    rng = np.random.default_rng(0)
+    for member in members:
+        camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
+        frame = own_frames(member, camera, n_tries=1)[0]
+        for n in (len(frame), 4, 3):
+            solve(Centroids(frame.xy[:n], frame.flux[:n]), camera, db)
+        solve(Centroids(rng.uniform(0, 1023, (12, 2)), rng.uniform(1, 100, 12)), camera, db)
+    # rigs: the rig method's own kernels (its master votes, the cross-camera proof of a sparse
+    # frame) on a frame of a member's stars dealt out to two cameras of one pointing
+    for member in members:
+        if RIG_METHOD in member.methods:
+            camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
+            frame = own_frames(member, camera, n_tries=1)[0]
+            ident = (1.0, 0.0, 0.0, 0.0)
+            for n in (len(frame), 4):
+                halves = [Centroids(frame.xy[k:n:2], frame.flux[k:n:2]) for k in (0, 1)]
+                solve_rig([(h, camera, ident) for h in halves], db)
+    # the unique-triangle proof's box screens, which only a frame whose match proves locally
+    # reaches: called directly on a member's own 3- and 4-star frame (a first use compiled
+    # them inside a request: ~0.7-1 s)
+    for member in members:
+        camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
+        frame = own_frames(member, camera, n_tries=1)[0]
+        warm_up_screens(member, camera, frame)
+        # the deeper recheck's screen (_could_pair_more), which only an answer found past the
+        # first pass reaches (its first use in a request loaded it from numba's cache)
+        _could_pair_more(_observation([(frame, camera, None)], _ONE_CAMERA), member,
+                         Verified(np.zeros(0, np.int64), np.zeros(0, np.int64), np.eye(3), 1.0, 0), 2.5)
+
+
+def own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centroids]:
+    """Noise-free frames of ``db``'s own brightest stars around a few of them (for
+    :func:`warm_up`)."""
+    stars = db.stars
+    mag = np.asarray(stars.mag, dtype=np.float64)
+    frames = []
+    for row in np.argsort(mag)[: 50 : 50 // n_tries]:
+        v = np.asarray(stars.vec[row], dtype=np.float64)
+        ra = math.degrees(math.atan2(v[1], v[0])) % 360
+        dec = math.degrees(math.asin(max(-1.0, min(1.0, v[2]))))
+        r = matrix_from_radec_roll(ra, dec, 0.0)
+        near = np.asarray(star_tree(db).query_ball_point(v, math.radians(camera.diagonal_fov_deg)), dtype=np.int64)
+        xy, inside = camera.vector_to_pixel(np.asarray(stars.vec[near]) @ r.T)
+        near, xy = near[inside], xy[inside]
+        order = np.argsort(mag[near])[:20]
+        frames.append(Centroids(xy[order], 10.0 ** (-0.4 * mag[near][order])))
+    return frames
+

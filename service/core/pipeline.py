@@ -28,7 +28,7 @@ from .methods.quad import QUERY_STARS
 from .methods.quad_kernel import RECHECK_REACH, could_pair_more
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .plan import fallback_next, search_plan
-from .refusal import no_solution, refusal
+from .refusal import SPARSE_ADVICE_STARS, no_solution, refusal, sparse_advice
 from .solution import solution_of
 from .types import Centroids, Solution
 from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier, field_grid, star_vec64
@@ -179,6 +179,7 @@ def solve_rig(
         raise InvalidInputError("cameras", "at least one camera frame is required")
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
+    given = db  # (``db`` names the member being searched below)
     plan, deepest = search_plan(db, [cam for _, cam, _ in frames], method, options.centroid_sigma_px)
     refused = refusal(frames, db, method, t0, options.centroid_sigma_px)
     if refused is not None:
@@ -241,7 +242,9 @@ def solve_rig(
     timings["identify"] = (t2 - t1) * 1e3
     if found is None:
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        return no_solution(method, tried, trials, t2 > deadline, timings, unprovable, len(obs))
+        sparse = isinstance(given, NavDatabaseSet) and len(obs.cameras) == 1 and 3 <= len(obs) <= SPARSE_ADVICE_STARS
+        return no_solution(method, tried, trials, t2 > deadline, timings, unprovable, len(obs),
+                           sparse_advice(obs.cameras[0]) if sparse else "")
     if deepest is not db:
         refined = _refine(obs, db, deepest, found, sigma, options)
         if refined is not None:
@@ -467,7 +470,7 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-__all__ = ["DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_image", "solve_rig", "tan_wcs", "warm_up"]
+__all__ = ["DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_image", "solve_rig", "tan_wcs"]
 
 
 

@@ -101,16 +101,37 @@ def _build_hint(side: float, diagonal: float) -> str:
             f"--fov-max {fov_max:g} --mag-limit {mag:.1f}")
 
 
+SPARSE_ADVICE_STARS = 5
+"""A frame of 3 to this many stars that a database set (the default) could not prove is told how
+to build a database for its camera: one holding every star to the camera's own limit, with no
+density cap, proves some frames that sparse which the set's members cannot (seed 002's 4-deg
+camera at 7 Mv, 0.5 px: 6 of 500 frames, all right; docs/benchmarks.md, the default database
+against a database per camera)."""
+
+
+def sparse_advice(camera: Camera) -> str:
+    """How to build the database that may prove a sparse frame of ``camera`` (see
+    :data:`SPARSE_ADVICE_STARS`)."""
+    side = min(camera.fov_deg, camera.fov_y_deg)
+    fov_max = math.ceil(camera.diagonal_fov_deg * 10 + 2) / 10
+    return ("a frame this sparse may be proven on a database built for this camera, holding every star to "
+            "the camera's own limit (a deeper one predicts stars the camera does not see): skyfix db build "
+            f"--out db/camera --fov-min {math.floor(side * 10) / 10:g} --fov-max {fov_max:g} "
+            "--methods maxangle,pyramid,triangle --mag-limit V, with V the faintest (approximate V) "
+            "magnitude the camera detects")
+
+
 def _refused(reason: NoSolutionReason, method: str, t0: float, message: str) -> Solution:
     return Solution(SolveStatus.NO_SOLUTION, method, reason=reason, message=message,
                     timings_ms={"total": (time.perf_counter() - t0) * 1e3})
 
 
 def no_solution(method: str, tried: list[str], trials: int, late: bool, timings: dict[str, float],
-                unprovable: Sequence[str] = (), n_stars: int | None = None) -> Solution:
+                unprovable: Sequence[str] = (), n_stars: int | None = None, advice: str = "") -> Solution:
     """The answer of a searched frame that nothing proved: why, and what ran. ``unprovable``:
     methods skipped because no answer of theirs could pass the coincidence bound on this frame of
-    ``n_stars`` stars (when nothing else ran, that is the reason: too few stars)."""
+    ``n_stars`` stars (when nothing else ran, that is the reason: too few stars); ``advice``, what
+    might prove it (:func:`sparse_advice`), ends the message."""
     ran = tuple(dict.fromkeys(tried))
     skipped = ", ".join(m for m in dict.fromkeys(unprovable) if m not in ran)  # on no member
     note = (f"; not run: {skipped} (even with all {n_stars} stars paired, no answer of theirs could pass "
@@ -125,9 +146,10 @@ def no_solution(method: str, tried: list[str], trials: int, late: bool, timings:
         reason, why = (NoSolutionReason.NOT_PROVEN,
                        f"{trials} candidate attitude(s) checked, none proven beyond the coincidence bound")
     hint = f"; {FAILURE_HINTS[method]}" if method in FAILURE_HINTS else ""
+    hint += f"; {advice}" if advice else ""
     return Solution(SolveStatus.NO_SOLUTION, tried[-1] if tried else method, reason=reason,
                     methods_tried=ran, message=f"{why} (methods tried: {', '.join(ran) or 'none'}){note}{hint}",
                     timings_ms=timings)
 
 
-__all__ = ["OUTSIDE_FACTOR", "method_refusal", "no_solution", "refusal"]
+__all__ = ["OUTSIDE_FACTOR", "SPARSE_ADVICE_STARS", "method_refusal", "no_solution", "refusal", "sparse_advice"]

@@ -98,3 +98,22 @@ def test_the_bound_tightens_with_the_mismatch(db: NavDatabase, frames) -> None:
             break
     assert len(probs) == 10
     assert sum(b > a for a, b in probs) >= 8
+
+
+def test_a_sparse_frame_the_default_set_refuses_is_told_how_to_build_the_database_that_proves_it(
+        db: NavDatabase, frames, default_set_db) -> None:
+    # frames 50, 394, 429, 450, 462 and 471 of these 500 (3-5 stars): the default set's members
+    # (density-capped, or to 7.0 Mv over 3.5-9 deg) cannot prove them; the camera's own database
+    # (every star to 7.0 Mv) can, and the refusal says how to build it
+    for i in (429, 50):
+        f = frames[i]
+        refused = solve(f.centroids, CAMERA, default_set_db, options=OPTIONS)
+        assert not refused.solved and 4 <= len(f.centroids) <= 5
+        assert "skyfix db build --out db/camera --fov-min 4 --fov-max 5.9" in refused.message
+        assert "--methods maxangle,pyramid,triangle --mag-limit V" in refused.message
+        own = solve(f.centroids, CAMERA, db, method="triangle", options=OPTIONS)
+        assert own.solved and score(own, f.quaternion, f.hip.tolist(), blends=f.blends).correct
+    # no such advice from the camera's own database, nor for a frame of more stars
+    assert "skyfix db build" not in solve(frames[76].centroids, CAMERA, db, options=OPTIONS).message
+    crowded = random_points(CAMERA, 9, rng=2)
+    assert "skyfix db build" not in solve(crowded, CAMERA, default_set_db, options=OPTIONS).message

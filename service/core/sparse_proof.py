@@ -126,6 +126,16 @@ def check_unique_triangle(
     return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), prob, looks)
 
 
+def _rows_but(groups: tuple[IntArray, ...], n: int, taken: IntArray) -> IntArray:
+    """The rows of ``groups`` (sorted, distinct, each below ``n``) not in ``taken``, sorted:
+    ``np.setdiff1d`` of their union, without its sorts (~15 us on a handful of rows)."""
+    keep = np.zeros(n, dtype=bool)
+    for g in groups:
+        keep[g] = True
+    keep[taken] = False
+    return np.flatnonzero(keep)
+
+
 def _sparse_attitudes(obs_vec: FloatArray, stars: FloatArray, cands: IntArray) -> FloatArray:
     """ICRS -> body rotations ``(K, 3, 3)`` mapping each catalogue triple onto the observed
     triangle (TRIAD on its first two stars, vectorised)."""
@@ -155,7 +165,7 @@ def _could_explain(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> In
     stars at the match radius in pixels among fewer catalogue stars, so a test on it never drops
     a triple that the field check keeps."""
     obs = verifier.obs
-    others = np.setdiff1d(np.arange(len(obs)), obs_idx)
+    others = _rows_but(obs.by_camera, len(obs), obs_idx)
     g = sky_grid(verifier.db)
     chord = EXPLAIN_SLACK * verifier.match_radius_px * obs.pixel_scale_rad
     return _box_kernel(np.ascontiguousarray(obs.vec[obs_idx], dtype=np.float64),
@@ -219,7 +229,7 @@ def _star_in_view(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> Int
         return np.zeros(len(cands), np.bool_)
     half = math.atan(inner / cam.f_px)
     g = field_grid(verifier.db, math.degrees(half))
-    others = np.setdiff1d(np.arange(len(obs)), obs_idx)
+    others = _rows_but(obs.by_camera, len(obs), obs_idx)
     boresight = np.ascontiguousarray(np.asarray(obs.mountings[0], dtype=np.float64)[2:3])  # body
     return _box_kernel(np.ascontiguousarray(obs.vec[obs_idx], dtype=np.float64), boresight,
                        np.ascontiguousarray(obs.vec[others], dtype=np.float64),
@@ -264,7 +274,7 @@ def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,
         half_deg = cam.diagonal_fov_deg / 2 + 0.2
         half = math.radians(half_deg)
         g = field_grid(verifier.db, half_deg)
-        rows = np.setdiff1d(obs.by_camera[c], obs_idx)
+        rows = _rows_but(obs.by_camera[c:c + 1], len(obs), obs_idx)
         u, e = field_check_kernel(rs, cands, np.ascontiguousarray(obs.mountings[c], dtype=np.float64), cams[c],
                                   dist[c], stars, 2 * math.sin(half / 2), g.cell, g.n_side, g.keys, g.starts,
                                   g.stars, g.columns, max_near, np.ascontiguousarray(obs.xy[rows]),

@@ -331,10 +331,23 @@ def edge_keys(e: np.ndarray, n_stars: int) -> np.ndarray:
 def same_handedness(vec: np.ndarray, tri_obs: np.ndarray, cand: np.ndarray) -> np.ndarray:
     """Mask of candidate triples whose orientation (sign of the triple product) matches the
     observed triangle's; a mirror image is never a match."""
-    s_obs = np.sign(np.linalg.det(tri_obs))
-    va, vb, vc = vec[cand[:, 0]], vec[cand[:, 1]], vec[cand[:, 2]]
-    s = np.einsum("ij,ij->i", va, cross(vb, vc))
-    return np.sign(s) == s_obs
+    s_obs = float(np.sign(np.linalg.det(tri_obs)))
+    return _handedness_mask(vec, np.ascontiguousarray(cand, dtype=np.int64), s_obs)
+
+
+@njit(cache=True, nogil=True)
+def _handedness_mask(vec: np.ndarray, cand: np.ndarray, s_obs: float) -> np.ndarray:
+    """Compiled body of :func:`same_handedness` (its numpy steps took ~0.2 us a triple on the
+    sparse proof's density boxes of thousands): ``sign(a . (b x c)) == s_obs`` per row."""
+    out = np.empty(len(cand), np.bool_)
+    for k in range(len(cand)):
+        a, b, c = vec[cand[k, 0]], vec[cand[k, 1]], vec[cand[k, 2]]
+        x0 = b[1] * c[2] - b[2] * c[1]
+        x1 = b[2] * c[0] - b[0] * c[2]
+        x2 = b[0] * c[1] - b[1] * c[0]
+        t = a[0] * x0 + a[1] * x1 + a[2] * x2
+        out[k] = (1.0 if t > 0 else -1.0 if t < 0 else 0.0) == s_obs
+    return out
 
 
 def same_handedness_many(vec: np.ndarray, obs: np.ndarray, obs_tris: np.ndarray, cand: np.ndarray) -> np.ndarray:

@@ -83,7 +83,7 @@ def check_unique_triangle(
     if unseen[0] > 0:
         return None
     m_obs, m_cat, _ = verifier._match_all(r)
-    if not np.all(np.isin(obs_idx, m_obs)):
+    if not set(obs_idx.tolist()) <= set(m_obs.tolist()):  # every star of the triangle paired
         return None
     delta = float(np.max(np.abs(pairwise_angles(obs.vec[obs_idx]) - pairwise_angles(stars[cat_idx]))))
     looks = max(n_looks, 1)
@@ -97,7 +97,7 @@ def check_unique_triangle(
         return None
     box_cands, box_halfwidth_rad = got
     box = np.asarray(box_cands, dtype=np.int64).reshape(-1, 3)
-    box = box[~np.all(box == cat_idx, axis=1)]  # the background around the match, without it
+    box = box[(box[:, 0] != cat_idx[0]) | (box[:, 1] != cat_idx[1]) | (box[:, 2] != cat_idx[2])]  # without the match
     thin = 1.0
     if len(box) > SPARSE_MAX_SAMPLE:  # a random thinning of a Poisson count is Poisson
         thin = len(box) / SPARSE_MAX_SAMPLE
@@ -228,7 +228,7 @@ def _star_in_view(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> Int
     if inner <= 0:
         return np.zeros(len(cands), np.bool_)
     half = math.atan(inner / cam.f_px)
-    g = field_grid(verifier.db, math.degrees(half))
+    g = field_grid(verifier.db, math.degrees(half), any_star=True)  # a star qualifying ends each scan
     others = _rows_but(obs.by_camera, len(obs), obs_idx)
     boresight = np.ascontiguousarray(np.asarray(obs.mountings[0], dtype=np.float64)[2:3])  # body
     return _box_kernel(np.ascontiguousarray(obs.vec[obs_idx], dtype=np.float64), boresight,

@@ -543,12 +543,15 @@ scan short: a 10.8-deg gathering of 55 stars took 4.5 us on 1-deg cells (~480 co
 at), 1.5 us on 4-deg ones."""
 
 
-def field_grid(db: NavDatabase, radius_deg: float = 0.0) -> SkyGrid:
+def field_grid(db: NavDatabase, radius_deg: float = 0.0, *, any_star: bool = False) -> SkyGrid:
     """The database's stars on the grid of :data:`FIELD_CELL_DEG` cells suited to gathering
-    every star within ``radius_deg`` of a point (built once per opened database and cell)."""
+    every star within ``radius_deg`` of a point (built once per opened database and cell); with
+    ``any_star``, to asking whether any star there qualifies, which stops at the first one: cells
+    up to 2.5 radii (the ball spans at most two a side). The sparse proof's in-image test of
+    ~2,000 attitudes, a 2-deg ball: 1-deg cells 20.6 ms, 2-deg 18.6, 4-deg 16.3, 8-deg 17.3."""
     cell = FIELD_CELL_DEG[0]
     for c in FIELD_CELL_DEG:
-        if c <= radius_deg / 2.5:
+        if c <= (radius_deg * 2.5 if any_star else radius_deg / 2.5):
             cell = c
     cache = db.__dict__.setdefault("_cache", {})
     key = ("field_grid", cell)

@@ -58,3 +58,11 @@ def test_own_frames_hold_the_databases_brightest_stars(default_set_db) -> None:
     assert len(frames) == 5 and all(3 <= len(f) <= 20 for f in frames)
     assert all(solve(f, camera, member).solved for f in frames)  # noise-free frames of its own stars
     assert len(own_frames(member, camera, n_tries=1)) == 1
+
+
+def test_map_pages_maps_every_array_file_of_the_database(default_set_db, monkeypatch) -> None:
+    files = sum(f.stat().st_size for f in default_set_db.path.rglob("*.npy") if f.stat().st_size > 128)
+    mapped = warmup.map_pages(default_set_db)
+    assert 0.95 * files <= mapped <= files  # every array's map (a few tiny arrays are read, not mapped)
+    monkeypatch.setattr(warmup.sys, "platform", "darwin")  # no MADV_POPULATE_READ: one byte read a page
+    assert warmup.map_pages(default_set_db) == mapped

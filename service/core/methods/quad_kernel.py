@@ -39,6 +39,12 @@ PERMS = np.array([[a, b, c, d] for a in range(4) for b in range(4) for c in rang
 """The 24 vertex orders of a pattern."""
 EDGE_PAIRS = np.array([[i, j] for i in range(4) for j in range(i + 1, 4)], dtype=np.int64)
 MAX_MARGINAL = 8
+PATTERN_PROBE_CAP = 4096
+"""Hash probes above which a pattern is looked up only after every cheaper pattern of the frame:
+a small pattern at 2 px of noise has its ratios known so loosely that its bins multiply across
+the six coordinates (9 bins a ratio: 9^5 x 3 = 177,000 probes), each probe a likely cache miss,
+and it matches hundreds of catalogue patterns. Skipping such patterns lost frames that only a
+tight cluster proves (the Pleiades' brightest, 50,000-65,000 probes a pattern), so they wait."""
 SETTLE = np.array(SETTLE_FACTORS, dtype=np.float64)
 NEAR_REUSE_COS = math.cos(math.radians(0.3))
 """A gathered field is reused while the boresight moves less than this (its margin is 0.5 deg)."""
@@ -147,114 +153,124 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
     n_marg = 0
     exhausted = True
     empty = np.zeros(0, np.int64)
-    for d in range(3, n_use):
-        for a in range(d):
-            for b in range(a + 1, d):
-                for cc in range(b + 1, d):
-                    if first_marg >= 0 and n_pat - first_marg >= confirm_patterns:
-                        return (STATUS_MARGINAL, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, False,
-                                marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1],
-                                marg_obs[:marg_off[n_marg]], marg_cat[:marg_off[n_marg]], marg_trials[:n_marg], probes, cands)
-                    if probes > max_probes or checks > max_checks:
-                        exhausted = False
+    deferred = 0
+    for phase in range(2):  # cheap patterns, then the deferred costly ones
+        if phase == 1 and (deferred == 0 or not exhausted):
+            break
+        for d in range(3, n_use):
+            for a in range(d):
+                for b in range(a + 1, d):
+                    for cc in range(b + 1, d):
+                        if first_marg >= 0 and n_pat - first_marg >= confirm_patterns:
+                            return (STATUS_MARGINAL, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, False,
+                                    marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1],
+                                    marg_obs[:marg_off[n_marg]], marg_cat[:marg_off[n_marg]], marg_trials[:n_marg], probes, cands)
+                        if probes > max_probes or checks > max_checks:
+                            exhausted = False
+                            break
+                        o[0], o[1], o[2], o[3] = a, b, cc, d
+                        sorted_edges(obs_vec, o, e)
+                        big = e[5]
+                        if big > edge_max + tol or big <= 4 * tol:
+                            if phase == 0:
+                                n_pat += 1  # counted once, never looked up
+                            continue
+                        total = 1
+                        for i in range(6):
+                            if i < 5:
+                                x[i] = e[i] / big / ratio_bin
+                                t[i] = tol * (1.0 + e[i] / big) / big / ratio_bin
+                            else:
+                                x[i] = big / edge_bin
+                                t[i] = tol / edge_bin
+                            lo[i] = max(int(x[i] - t[i]), 0)
+                            hi[i] = int(x[i] + t[i])
+                            if i < 5:
+                                hi[i] = min(hi[i], N_RATIO_BINS - 1)
+                            total *= hi[i] - lo[i] + 1
+                        if (total > PATTERN_PROBE_CAP) != (phase == 1):
+                            if phase == 0:
+                                deferred += 1
+                            continue  # costly patterns after every cheap one (PATTERN_PROBE_CAP)
+                        n_pat += 1
+                        probes += total
+                        # every probe's first table word requested at once: the table (32-64 MB)
+                        # misses the cache on nearly every probe, and the scan below would wait for
+                        # each miss in turn
+                        for i in range(6):
+                            cur[i] = lo[i]
+                        for _ in range(total):
+                            prefetch(table, np.int64(key_hash(combine_key(cur)) & mask))
+                            for i in range(6):
+                                cur[i] += 1
+                                if cur[i] <= hi[i]:
+                                    break
+                                cur[i] = lo[i]
+                        for i in range(6):
+                            cur[i] = lo[i]
+                        for i in range(6):  # where the query's range lies inside its first and last bin
+                            lo_fine[i] = max(int((x[i] - t[i] - lo[i]) * FINE_STEPS), 0)
+                            hi_fine[i] = min(int((x[i] + t[i] - hi[i]) * FINE_STEPS), FINE_STEPS - 1)
+                        for _ in range(total):
+                            for i in range(6):
+                                f_lo[i] = lo_fine[i] if cur[i] == lo[i] else 0
+                                f_hi[i] = hi_fine[i] if cur[i] == hi[i] else FINE_STEPS - 1
+                            h = key_hash(combine_key(cur))
+                            finger = np.int64(h >> np.uint64(64 - FINGER_BITS))
+                            sl = h & mask
+                            while table[sl] != 0:
+                                word = table[sl]
+                                sl = (sl + np.uint64(1)) & mask
+                                if (word >> (6 * FINE_BITS)) & FINGER_MASK != finger:
+                                    continue
+                                inside = True
+                                for i in range(6):
+                                    fi = (word >> (FINE_BITS * (5 - i))) & (FINE_STEPS - 1)
+                                    if fi < f_lo[i] or fi > f_hi[i]:
+                                        inside = False
+                                        break
+                                if not inside:
+                                    continue
+                                p = (word >> 32) - 1
+                                cands += 1
+                                for i in range(4):
+                                    c[i] = patterns[p, i]
+                                sorted_edges(star_vec, c, ec)
+                                fits = True
+                                for i in range(6):
+                                    if abs(ec[i] - e[i]) > tol:
+                                        fits = False
+                                        break
+                                if fits and _label(obs_vec, o, star_vec, c, tol, lab):
+                                    trials += 1
+                                    checks += 1
+                                    res = _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord,
+                                                  s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
+                                                  g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
+                                                  near_chord, mount, buf, near_state, mounts, cams, dist,
+                                                  rows, row_off, radius_px, quick_tol, trials)
+                                    ok, m_obs, m_cat, r, prob = res
+                                    if ok and prob <= max_false_prob:
+                                        if prob <= strong_false_prob:
+                                            return (STATUS_FOUND, o.copy(), lab.copy(), m_obs, m_cat, r, prob,
+                                                    trials, n_pat, False, marg_r[:0], marg_prob[:0],
+                                                    marg_off[:1], empty, empty, marg_trials[:0], probes, cands)
+                                        if n_marg < MAX_MARGINAL:
+                                            n_marg = keep_marginal(marg_r, marg_prob, marg_trials, marg_off, marg_obs,
+                                                                   marg_cat, n_marg, r, prob, trials, m_obs, m_cat)
+                                        if first_marg < 0:
+                                            first_marg = n_pat
+                            for i in range(6):  # next bin combination
+                                cur[i] += 1
+                                if cur[i] <= hi[i]:
+                                    break
+                                cur[i] = lo[i]
+                    if not exhausted:
                         break
-                    o[0], o[1], o[2], o[3] = a, b, cc, d
-                    n_pat += 1
-                    sorted_edges(obs_vec, o, e)
-                    big = e[5]
-                    if big > edge_max + tol or big <= 4 * tol:
-                        continue
-                    total = 1
-                    for i in range(6):
-                        if i < 5:
-                            x[i] = e[i] / big / ratio_bin
-                            t[i] = tol * (1.0 + e[i] / big) / big / ratio_bin
-                        else:
-                            x[i] = big / edge_bin
-                            t[i] = tol / edge_bin
-                        lo[i] = max(int(x[i] - t[i]), 0)
-                        hi[i] = int(x[i] + t[i])
-                        if i < 5:
-                            hi[i] = min(hi[i], N_RATIO_BINS - 1)
-                        total *= hi[i] - lo[i] + 1
-                    probes += total
-                    # every probe's first table word requested at once: the table (32-64 MB)
-                    # misses the cache on nearly every probe, and the scan below would wait for
-                    # each miss in turn
-                    for i in range(6):
-                        cur[i] = lo[i]
-                    for _ in range(total):
-                        prefetch(table, np.int64(key_hash(combine_key(cur)) & mask))
-                        for i in range(6):
-                            cur[i] += 1
-                            if cur[i] <= hi[i]:
-                                break
-                            cur[i] = lo[i]
-                    for i in range(6):
-                        cur[i] = lo[i]
-                    for i in range(6):  # where the query's range lies inside its first and last bin
-                        lo_fine[i] = max(int((x[i] - t[i] - lo[i]) * FINE_STEPS), 0)
-                        hi_fine[i] = min(int((x[i] + t[i] - hi[i]) * FINE_STEPS), FINE_STEPS - 1)
-                    for _ in range(total):
-                        for i in range(6):
-                            f_lo[i] = lo_fine[i] if cur[i] == lo[i] else 0
-                            f_hi[i] = hi_fine[i] if cur[i] == hi[i] else FINE_STEPS - 1
-                        h = key_hash(combine_key(cur))
-                        finger = np.int64(h >> np.uint64(64 - FINGER_BITS))
-                        sl = h & mask
-                        while table[sl] != 0:
-                            word = table[sl]
-                            sl = (sl + np.uint64(1)) & mask
-                            if (word >> (6 * FINE_BITS)) & FINGER_MASK != finger:
-                                continue
-                            inside = True
-                            for i in range(6):
-                                fi = (word >> (FINE_BITS * (5 - i))) & (FINE_STEPS - 1)
-                                if fi < f_lo[i] or fi > f_hi[i]:
-                                    inside = False
-                                    break
-                            if not inside:
-                                continue
-                            p = (word >> 32) - 1
-                            cands += 1
-                            for i in range(4):
-                                c[i] = patterns[p, i]
-                            sorted_edges(star_vec, c, ec)
-                            fits = True
-                            for i in range(6):
-                                if abs(ec[i] - e[i]) > tol:
-                                    fits = False
-                                    break
-                            if fits and _label(obs_vec, o, star_vec, c, tol, lab):
-                                trials += 1
-                                checks += 1
-                                res = _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord,
-                                              s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
-                                              g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
-                                              near_chord, mount, buf, near_state, mounts, cams, dist,
-                                              rows, row_off, radius_px, quick_tol, trials)
-                                ok, m_obs, m_cat, r, prob = res
-                                if ok and prob <= max_false_prob:
-                                    if prob <= strong_false_prob:
-                                        return (STATUS_FOUND, o.copy(), lab.copy(), m_obs, m_cat, r, prob,
-                                                trials, n_pat, False, marg_r[:0], marg_prob[:0],
-                                                marg_off[:1], empty, empty, marg_trials[:0], probes, cands)
-                                    if n_marg < MAX_MARGINAL:
-                                        n_marg = keep_marginal(marg_r, marg_prob, marg_trials, marg_off, marg_obs,
-                                                               marg_cat, n_marg, r, prob, trials, m_obs, m_cat)
-                                    if first_marg < 0:
-                                        first_marg = n_pat
-                        for i in range(6):  # next bin combination
-                            cur[i] += 1
-                            if cur[i] <= hi[i]:
-                                break
-                            cur[i] = lo[i]
                 if not exhausted:
                     break
             if not exhausted:
                 break
-        if not exhausted:
-            break
     status = STATUS_MARGINAL if n_marg else STATUS_NONE
     return (status, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, exhausted and n_marg == 0,
             marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1], marg_obs[:marg_off[n_marg]],

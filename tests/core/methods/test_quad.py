@@ -114,3 +114,36 @@ def test_auto_answers_with_quad_on_the_default_database(default_set_db) -> None:
     # more points than quad looks at: the fallbacks run (within EXHAUSTED_BUDGET_MS), still no answer
     sol = solve(random_points(CAM, 25, rng), CAM, default_set_db, options=OPTS)
     assert sol.status is SolveStatus.NO_SOLUTION and "quad" in sol.methods_tried and len(sol.methods_tried) > 1
+
+
+def _search(db, preset: str, frame, noise: float):
+    from service.core.plan import search_plan
+    from service.core.presets import PRESETS
+
+    camera = PRESETS[preset].camera
+    obs = _observation([(frame.centroids, camera, None)], [np.eye(3)])
+    member = search_plan(db, [camera], "auto", noise)[0][0][0]
+    tol = (3.0 * math.sqrt(2.0) * noise + 0.5) * obs.pixel_scale_rad
+    return get_matcher(member, "quad").search(obs, Verifier(member, obs, match_radius_px=3.0 * noise), tol), obs
+
+
+def test_costly_patterns_wait_for_every_cheap_one(default_set_db) -> None:
+    """PATTERN_PROBE_CAP: a loosely known pattern (thousands of hash probes) is looked up after
+    the frame's cheap ones, not skipped. Frame 188 of bench_peers' seed 000 sweep at 2 px (seed
+    0) spent 75,000 probes on its first patterns before a proof; the Pleiades frame of
+    bench_wrong's seed 003 cell at 2 px with 5 false stars is proven only by a Pleiades quad of
+    64,800 probes, which a cap that skipped such patterns lost."""
+    from service.core.methods.quad_kernel import PATTERN_PROBE_CAP
+    from service.core.presets import PRESETS
+
+    p0 = PRESETS["seed000"]
+    frame = simulate_frames(p0.camera, 200, SimConfig(mag_limit=6.5, centroid_noise_px=2.0, false_stars=2),
+                            rng=8726688144360986500)[188]
+    res, _ = _search(default_set_db, "seed000", frame, 2.0)
+    assert res[0] == STATUS_FOUND and res[16] <= 4 * PATTERN_PROBE_CAP  # probes before the proof
+    p3 = PRESETS["seed003"]
+    frame = simulate_frames(p3.camera, 833, SimConfig(mag_limit=p3.mag_limit, centroid_noise_px=2.0, false_stars=5),
+                            rng=13318148164082012119)[84]
+    res, obs = _search(default_set_db, "seed003", frame, 2.0)
+    assert res[0] == STATUS_FOUND and res[16] > PATTERN_PROBE_CAP  # a deferred pattern proved it
+    assert 17702 in {int(frame.hip[obs.index[o]]) for o in res[1]}  # Alcyone's quad

@@ -33,8 +33,9 @@ def map_pages(db: NavDatabase | NavDatabaseSet) -> int:
     before; each first touch is a page fault (~1 us from the page cache, a disk read if it was
     dropped). Seed 000 at 2 px, a frame whose searches read thousands of table pages took 10-11
     ms the first time and 4 ms after; with the pages mapped at the warm-up, 6.5 ms. Mapping the
-    default set's 626 MB from the page cache takes ~60 ms (``madvise(MADV_POPULATE_READ)``; one
-    byte read a page where that is missing). The pages stay the operating system's to drop."""
+    default set's 626 MB from the page cache takes ~60 ms, from a cold disk the time to read it
+    (``madvise(MADV_POPULATE_READ)``; one byte read a page where that is missing). The pages stay
+    the operating system's to drop."""
     members = db.members.values() if isinstance(db, NavDatabaseSet) else [db]
     maps: dict[int, mmap.mmap] = {}
     arrays: list[np.ndarray] = []

@@ -37,7 +37,7 @@ from .quad_kernel import keep_marginal, verify_pairs
 
 TRIANGLES_PER_CALL = 64
 """Observed triangles one call may search before Python checks the clock again (a 7-star frame's
-every triangle, with its near-tie relabellings, fits in one call)."""
+35 triangles and most of their near-tie relabellings fit in one call)."""
 
 STOP_NONE = 0
 STOP_SETTLED = 1

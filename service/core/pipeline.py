@@ -242,9 +242,9 @@ def solve_rig(
     timings["identify"] = (t2 - t1) * 1e3
     if found is None:
         timings["total"] = (time.perf_counter() - t0) * 1e3
-        sparse = isinstance(given, NavDatabaseSet) and len(obs.cameras) == 1 and 3 <= len(obs) <= SPARSE_ADVICE_STARS
+        sparse = isinstance(given, NavDatabaseSet) and 3 <= len(obs) <= SPARSE_ADVICE_STARS
         return no_solution(method, tried, trials, t2 > deadline, timings, unprovable, len(obs),
-                           sparse_advice(obs.cameras[0]) if sparse else "")
+                           sparse_advice(obs.cameras) if sparse else "")
     if deepest is not db:
         refined = _refine(obs, db, deepest, found, sigma, options)
         if refined is not None:

@@ -103,22 +103,25 @@ def _build_hint(side: float, diagonal: float) -> str:
 
 SPARSE_ADVICE_STARS = 5
 """A frame of 3 to this many stars that a database set (the default) could not prove is told how
-to build a database for its camera: one holding every star to the camera's own limit, with no
+to build a database for its camera(s): one holding every star to the camera's own limit, with no
 density cap, proves some frames that sparse which the set's members cannot (seed 002's 4-deg
 camera at 7 Mv, 0.5 px: 6 of 500 frames, all right; docs/benchmarks.md, the default database
-against a database per camera)."""
+against a database per camera; GF-7's rig at 5.5 Mv: 3-star frames, docs/methods.md, sparse rig
+frames)."""
 
 
-def sparse_advice(camera: Camera) -> str:
-    """How to build the database that may prove a sparse frame of ``camera`` (see
+def sparse_advice(cameras: Sequence[Camera]) -> str:
+    """How to build the database that may prove a sparse frame of ``cameras`` (one camera, or a
+    rig: then with ``multifov``, whose cross-camera proof names 3-star rig frames; see
     :data:`SPARSE_ADVICE_STARS`)."""
-    side = min(camera.fov_deg, camera.fov_y_deg)
-    fov_max = math.ceil(camera.diagonal_fov_deg * 10 + 2) / 10
-    return ("a frame this sparse may be proven on a database built for this camera, holding every star to "
+    side = min(min(c.fov_deg, c.fov_y_deg) for c in cameras)
+    fov_max = math.ceil(max(c.diagonal_fov_deg for c in cameras) * 10 + 2) / 10
+    what, methods = ("this camera", "maxangle,pyramid,triangle") if len(cameras) == 1 else ("this rig", "multifov")
+    return (f"a frame this sparse may be proven on a database built for {what}, holding every star to "
             "the camera's own limit (a deeper one predicts stars the camera does not see): skyfix db build "
             f"--out db/camera --fov-min {math.floor(side * 10) / 10:g} --fov-max {fov_max:g} "
-            "--methods maxangle,pyramid,triangle --mag-limit V, with V the faintest (approximate V) "
-            "magnitude the camera detects")
+            f"--methods {methods} --mag-limit V, with V the faintest (approximate V) magnitude the camera "
+            "detects")
 
 
 def _refused(reason: NoSolutionReason, method: str, t0: float, message: str) -> Solution:

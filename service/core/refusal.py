@@ -93,12 +93,16 @@ def _build_hint(side: float, diagonal: float) -> str:
     """The ``skyfix db build`` command of a database for a camera of this side and diagonal
     (deg); its magnitude limit keeps about seed 000's stars a frame (V 6.5 at 8.6 deg; star
     counts grow ~10^0.45 a magnitude), within V 4.5-9."""
-    fov_max = math.ceil(diagonal * 10 + 2) / 10
-    if fov_max >= 90:
+    if math.ceil(diagonal * 10 + 2) / 10 >= 90:
         return "skyfix databases serve fields below 90 deg (diagonal)"
     mag = min(max(6.5 + math.log10((8.6 / max(side, 0.1)) ** 2) / 0.45, 4.5), 9.0)
-    return (f"a database that serves it: skyfix db build --out db/camera --fov-min {math.floor(side * 10) / 10:g} "
-            f"--fov-max {fov_max:g} --mag-limit {mag:.1f}")
+    return f"a database that serves it: skyfix db build --out db/camera {_fov_flags(side, diagonal)} --mag-limit {mag:.1f}"
+
+
+def _fov_flags(side: float, diagonal: float) -> str:
+    """``skyfix db build``'s field flags for cameras of this narrowest side and widest diagonal
+    (deg): the side rounded down, the diagonal up with 0.2 deg to spare."""
+    return f"--fov-min {math.floor(side * 10) / 10:g} --fov-max {math.ceil(diagonal * 10 + 2) / 10:g}"
 
 
 SPARSE_ADVICE_STARS = 5
@@ -114,14 +118,12 @@ def sparse_advice(cameras: Sequence[Camera]) -> str:
     """How to build the database that may prove a sparse frame of ``cameras`` (one camera, or a
     rig: then with ``multifov``, whose cross-camera proof names 3-star rig frames; see
     :data:`SPARSE_ADVICE_STARS`)."""
-    side = min(min(c.fov_deg, c.fov_y_deg) for c in cameras)
-    fov_max = math.ceil(max(c.diagonal_fov_deg for c in cameras) * 10 + 2) / 10
+    flags = _fov_flags(min(min(c.fov_deg, c.fov_y_deg) for c in cameras), max(c.diagonal_fov_deg for c in cameras))
     what, methods = ("this camera", "maxangle,pyramid,triangle") if len(cameras) == 1 else ("this rig", "multifov")
     return (f"a frame this sparse may be proven on a database built for {what}, holding every star to "
             "the camera's own limit (a deeper one predicts stars the camera does not see): skyfix db build "
-            f"--out db/camera --fov-min {math.floor(side * 10) / 10:g} --fov-max {fov_max:g} "
-            f"--methods {methods} --mag-limit V, with V the faintest (approximate V) magnitude the camera "
-            "detects")
+            f"--out db/camera {flags} --methods {methods} --mag-limit V, with V the faintest (approximate V) "
+            "magnitude the camera detects")
 
 
 def _refused(reason: NoSolutionReason, method: str, t0: float, message: str) -> Solution:

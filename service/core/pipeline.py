@@ -79,27 +79,26 @@ class SolveOptions:
 
 DEFAULT_OPTIONS = SolveOptions()
 
-QUAD_REFUSE_STARS = 8
-"""A frame of this many stars up to ``QUERY_STARS`` that ``quad`` searched exhaustively (every
-pattern of its stars, on every member) without a proof is refused without the fallback methods:
-they would search the same stars. Any other frame of 5 stars or more that ``quad`` searched
-exhaustively gets the first fallback alone (``maxangle`` on the default set), on each member,
-for ``FEW_STARS_MAX_TRIALS`` hypotheses (5-7 stars) or ``EXHAUSTED_BUDGET_MS`` (more than ``QUERY_STARS``;
-running it on the first member only saved ~0.3 ms on a third of seed 002's frames but lost 6
-frames in 100,000 of ``bench.bench_wrong``, which a deeper member's pattern stars prove): one
-of 5-7 stars may still be proven by a triangle and two more stars where 4 + 1 is not enough,
-and in one of more than ``QUERY_STARS`` stars bright false detections (branches in a real image)
-can hide the stars from the brightest. The later fallbacks (``pyramid``, ``triangle``) proved 2
-more frames in 9,000 of the five paper cameras (0.5-2 px, 0-2 false stars) at 17-27 ms each,
-and spent up to 64 ms on each of the 288 they could not prove; on random points ``pyramid``
-took 130-500 ms. Measured with ``python -m bench.profile_default`` (docs/performance.md)."""
 EXHAUSTED_BUDGET_MS = 50.0
-"""Time the first fallback gets after ``quad`` searched a frame of more than ``QUERY_STARS``
-stars exhaustively (see ``QUAD_REFUSE_STARS``; the real image tree.jpg needs most of it)."""
+"""Time the first fallback (``maxangle`` on the default set) gets, on each member, after
+``quad`` searched a frame of more than ``QUERY_STARS`` stars exhaustively (every pattern of its
+brightest stars, on every member) without a proof: bright false detections can hide the stars
+from the brightest (the real image tree.jpg needs most of it). The later fallbacks
+(``pyramid``, ``triangle``) proved 2 more frames in 9,000 of the five paper cameras (0.5-2 px,
+0-2 false stars) at 17-27 ms each, and spent up to 64 ms on each of the 288 they could not
+prove; on random points ``pyramid`` took 130-500 ms. Measured with ``python -m
+bench.profile_default`` (docs/performance.md)."""
 FEW_STARS_MAX_TRIALS = 1000
 """Hypotheses the first fallback may add, over every member, after ``quad`` searched a frame
-of 5-7 stars exhaustively (see ``QUAD_REFUSE_STARS``): a count of work, so the same frame gets
-the same answer on a loaded machine, as the issue asks of budgets. Session 13, 2,593 frames of
+of 5 to ``QUERY_STARS`` stars exhaustively without a proof: a count of work, so the same frame
+gets the same answer on a loaded machine, as the issue asks of budgets. Such a frame may still
+be proven by a triangle and two more stars where 4 + 1 is not enough, or by stars that ``quad``'s
+table leaves out: its pattern stars are the brightest of each region, so a frame whose bright
+detections are false can hold only fainter true stars (seed 002 at 0.5 px with 3-5 false stars:
+8-10-star frames, refused here until session 16, proven by ``maxangle``: 96 -> 118, 84 -> 111,
+99 -> 119 of 200 frames, where tetra3rs names 106, 93 and 101). Running it on the first member
+only saved ~0.3 ms on a third of seed 002's frames but lost 6 frames in 100,000 of
+``bench.bench_wrong``, which a deeper member's pattern stars prove. Session 13, 2,593 frames of
 5-7 stars that reached the fallback (the five paper cameras at 0.5/1/2 px with 0/2/5 false
 stars): the 875 it proved took at most 220 hypotheses (p99 103), those it could not prove up
 to 16,455 (p99 617; seed 000 at 2 px: up to 13 ms). Until session 13 the fallback had 20 ms
@@ -107,12 +106,12 @@ of the clock; a 3-ms clock budget tried here refused 2 frames of 47,500 it prove
 ms when the machine stalled."""
 
 SMALL_FRAME_FALLBACK_FIRST = True
-"""On a frame of 5-7 stars (``quad.MIN_STARS`` to ``QUAD_REFUSE_STARS - 1``) that a member's
-``quad`` searched exhaustively without a proof, that member's first fallback runs before the
-next member's ``quad``: there ``quad``'s 4-star patterns with one more star rarely pass the bound
-(seed 002's 4096-px camera, 7 stars of which 2 false: the next member's ``quad`` proved none of
-443, at 0.087 ms a frame, and ``maxangle`` on the first member proved 422). Its hypotheses do not
-count against the fallbacks' ``FEW_STARS_MAX_TRIALS``."""
+"""On a frame of 5 to ``QUERY_STARS`` stars that a member's ``quad`` searched exhaustively
+without a proof, that member's first fallback runs before the next member's ``quad``: there
+``quad``'s 4-star patterns with one more star rarely pass the bound (seed 002's 4096-px camera,
+7 stars of which 2 false: the next member's ``quad`` proved none of 443, at 0.087 ms a frame,
+and ``maxangle`` on the first member proved 422). Its hypotheses do not count against the
+fallbacks' ``FEW_STARS_MAX_TRIALS``."""
 
 SPARSE_PROOF_METHODS = frozenset({"triangle", "multifov"})
 """Methods that can prove a frame of fewer stars than the verifier's ``min_matches`` (4): the
@@ -213,15 +212,13 @@ def solve_rig(
     misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?
     unprovable: list[str] = []  # methods skipped: no answer of theirs could pass the bound here
     search_deadline = deadline  # shortened after an exhaustive quad miss (EXHAUSTED_BUDGET_MS)
-    trial_limit: int | None = None  # set after an exhaustive quad miss of 5-7 stars (FEW_STARS_MAX_TRIALS)
-    small = QUAD_MIN_STARS <= len(obs) < QUAD_REFUSE_STARS
+    trial_limit: int | None = None  # set after an exhaustive quad miss of 5-10 stars (FEW_STARS_MAX_TRIALS)
+    small = QUAD_MIN_STARS <= len(obs) <= QUERY_STARS
     for sigma in sigmas:
         order = list(plan)
         for i, (member, methods) in enumerate(order):
             if misses and all(misses) and "quad" not in methods:
-                if QUAD_REFUSE_STARS <= len(obs) <= QUERY_STARS:
-                    continue  # fast refusal: the fallbacks would search the same stars (see QUAD_REFUSE_STARS)
-                methods = methods[:1]  # the first fallback alone (maxangle; see QUAD_REFUSE_STARS)
+                methods = methods[:1]  # the first fallback alone (maxangle; see FEW_STARS_MAX_TRIALS)
                 if len(obs) > QUERY_STARS:
                     search_deadline = min(search_deadline, time.perf_counter() + EXHAUSTED_BUDGET_MS / 1e3)
                 elif trial_limit is None:  # over every member's fallback (FEW_STARS_MAX_TRIALS)

@@ -221,6 +221,25 @@ def test_few_star_frames_searched_in_full_get_a_budget_of_hypotheses(default_set
     assert compiled.message == looped.message  # the same count of hypotheses
 
 
+def test_an_8_star_frame_whose_bright_detections_are_false_gets_the_fallback(default_set_db) -> None:
+    """An 8-star seed 002 frame with 3 false stars that ``quad`` searched in full without a
+    proof (its true stars are fainter than the pattern stars of its region) is not refused: the
+    first fallback proves it, and every answer is right. Until session 16 such frames were
+    refused without the fallback (seed 002 at 0.5 px, 3 false stars: 96 -> 118 of 200 named)."""
+    p = PRESETS["seed002"]
+    opts = SolveOptions(centroid_sigma_px=0.5)
+    frames = [f for f in simulate_frames(p.camera, 400, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=0.5,
+                                                                   false_stars=3), rng=21)
+              if len(f.centroids) == 8]
+    sols = [solve(f.centroids, p.camera, default_set_db, options=opts) for f in frames]
+    by_fallback = [(f, s) for f, s in zip(frames, sols, strict=True)
+                   if s.solved and s.methods_tried == ("quad", "maxangle")]
+    assert len(by_fallback) >= 3
+    for f, s in zip(frames, sols, strict=True):
+        if s.solved:
+            assert score(s, f.quaternion, f.hip.tolist(), blends=f.blends).correct
+
+
 def test_a_small_frame_gets_the_first_members_fallback_before_the_next_members_quad(default_set_db,
                                                                                    monkeypatch) -> None:
     """SMALL_FRAME_FALLBACK_FIRST: a 7-star seed 002 frame with 2 false stars, which quad cannot

@@ -10,9 +10,9 @@ compiled call (:mod:`.quad_kernel`) that applies the shared verifier's steps and
 bound; Python only converts the input and wraps the answer.
 
 A frame of fewer than 5 stars, or a rig of several cameras, is left to the other methods.
-After a miss, the verifier's ``exhausted`` says whether every pattern of the brightest ``QUERY_STARS`` stars was looked up (then a frame
-holding that many stars has no catalogue pattern among its brightest: see the pipeline's
-fast refusal).
+After a miss, the verifier's ``exhausted`` says whether every pattern of the brightest
+``QUERY_STARS`` stars was looked up: then the pipeline gives the frame its first fallback alone,
+within a budget (``pipeline.FEW_STARS_MAX_TRIALS``, ``EXHAUSTED_BUDGET_MS``).
 """
 
 from __future__ import annotations

@@ -208,6 +208,38 @@ def _project_and_pair(cam_vec: np.ndarray, f: float, cx: float, cy: float, w: in
     return out_obs[:n_out].copy(), out_pred[:n_out].copy(), n_in
 
 
+@njit(cache=True, nogil=True)
+def binomial_tail(n: int, k: int, p: float) -> float:
+    """``P[Binomial(n, p) >= k]`` (= the regularised incomplete beta ``I_p(k, n - k + 1)``)."""
+    if k <= 0:
+        return 1.0
+    if k > n or p <= 0.0:
+        return 0.0
+    if p >= 1.0:
+        return 1.0
+    lp, lq = math.log(p), math.log1p(-p)
+    base = math.lgamma(n + 1.0)
+    total = 0.0
+    for j in range(k, n + 1):
+        total += math.exp(base - math.lgamma(j + 1.0) - math.lgamma(n - j + 1.0) + j * lp + (n - j) * lq)
+    return min(total, 1.0)
+
+
+@njit(cache=True, nogil=True)
+def least_extras(n_free: int, pair_p: float, trials: int, max_false_prob: float, min_matches: int) -> int:
+    """The fewest extra pairs (stars beyond a hypothesis, of ``n_free`` observed ones) with which
+    a check after ``trials`` hypotheses could still pass the coincidence bound; ``n_free + 1``
+    if none could. A check's answer holds ``m >= max(min_matches, k)`` pairs, each a prediction
+    inside the image, so its ``p`` is at least ``m * pair_p`` (``pair_p``: one match disc's
+    share of the image area) and its bound at least ``P[Binomial(n_free, p) >= k] * trials``
+    (:meth:`~service.core.verify.Verifier.check`, :func:`verify_pairs`)."""
+    t = max(trials, 1)
+    for k in range(1, n_free + 1):
+        if binomial_tail(n_free, k, min(1.0, max(min_matches, k) * pair_p)) * t <= max_false_prob:
+            return k
+    return n_free + 1
+
+
 CROWD = 2.0
 """No other candidate within this many match radii, on either side, for a pair to count."""
 

@@ -31,7 +31,7 @@ from scipy.special import betainc
 
 from .attitude import ARCSEC_PER_RAD, wahba_svd
 from .camera import Camera
-from .match import RigArrays, match_rig, refine, rig_arrays
+from .match import RigArrays, least_extras, match_rig, refine, rig_arrays
 from .navdb.reader import NavDatabase
 from .screen import screen_hits
 from .skygrid import SkyGrid, build_sky_grid
@@ -222,16 +222,40 @@ class Verifier:
         hits = self._screen(obs_tris, cands, others)
         order = np.argsort(-hits, kind="stable")
         order = order[hits[order] >= (1 if len(self.obs) > 3 else 0)]
+        need = self._needed_extras(len(others))
         for row in order[:CHECKS_PER_CHUNK]:
             if time.perf_counter() > self.deadline or self.over_limit():
                 break
             if self.marginal and self.names_marginal(obs_tris[row], cands[row]):
                 self.trials += 1  # a trial all the same, as check() would count it
                 continue
+            if hits[row] < need and self._wide_hits(obs_tris[row], cands[row], others) < need:
+                self.trials += 1  # a trial all the same, as check() would count it
+                continue  # too few stars even in the wide screen to pass the bound
             found = self.check(obs_tris[row], cands[row])
             if found is not None:
                 return found
         return None
+
+    def _needed_extras(self, n_screened: int) -> int:
+        """The extra pairs a check would need now to pass the bound
+        (:func:`~service.core.match.least_extras`), less the stars the screen did not look at
+        (``n_screened`` of the frame's stars were): a candidate screened with fewer hits is
+        checked only if the wide screen (:meth:`_wide_hits`) finds enough."""
+        n = len(self.obs)
+        if n <= 3:
+            return 0
+        area = sum(float(c.width) * float(c.height) for c in self.obs.cameras)
+        need = least_extras(n - 3, math.pi * self.match_radius_px ** 2 / max(area, 1.0), self.trials + 1,
+                            self.max_false_prob, self.min_matches)
+        return need - (n - n_screened)
+
+    def _wide_hits(self, obs_tri: IntArray, cand: IntArray, others: IntArray) -> int:
+        """:meth:`_screen` of one candidate at ``NEED_SCREEN_FACTOR`` times its chord (see
+        :data:`NEED_SCREEN_FACTOR`)."""
+        radius = NEED_SCREEN_FACTOR * 1.5 * self.match_radius_px * self.obs.pixel_scale_rad
+        return int(screen_hits(self.obs.vec, obs_tri[None], cand[None], others, sky_grid(self.db), radius,
+                               sky_mask(self.db, radius))[0])
 
     def _screen(self, obs_tris: IntArray, cands: IntArray, others: IntArray) -> IntArray:
         """Hits per candidate: ``others`` (observed rows not in its triangle) that land near a
@@ -412,6 +436,13 @@ class Verifier:
 
 CHECKS_PER_CHUNK = 8
 """Candidates of one batch (:meth:`Verifier.screen_and_check_many`) fully checked, best screened first."""
+
+NEED_SCREEN_FACTOR = 2.0
+"""A candidate whose screen (1.5 match radii) finds fewer stars than a check would need to pass
+the coincidence bound (:func:`~service.core.match.least_extras`) is checked only if a screen this
+many times wider finds enough: the refits of a check can pair a star that the triangle's own
+attitude put beyond the screen (10 frames in 47,500 at 1-2 px when the narrow screen alone
+decided)."""
 
 SETTLE_FACTORS = (3.0, 6.0)
 """Wide radii (in match radii) at which an accepted attitude is tested for a near miss."""

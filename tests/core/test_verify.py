@@ -218,3 +218,64 @@ def test_every_field_grid_gathers_the_same_stars() -> None:
                 n = collect_within(p[0], p[1], p[2], chord, g.cell, g.n_side, g.keys, g.starts, g.stars, g.vec,
                                    g.columns, buf)
                 np.testing.assert_array_equal(np.sort(buf[:n]), want)
+
+
+@pytest.mark.parametrize("n_free", [1, 3, 6, 20])
+@pytest.mark.parametrize("pair_p", [1e-7, 1.2e-6, 2e-5, 1e-3])
+@pytest.mark.parametrize("trials", [1, 40, 5000])
+def test_least_extras_is_the_first_count_of_pairs_that_passes_the_bound(n_free, pair_p, trials) -> None:
+    """``least_extras``: the smallest k whose best case ``P[Binomial(n_free, max(4, k) pair_p) >= k]
+    * trials`` passes the bound (the binomial tail as ``Verifier.check`` computes it), or
+    ``n_free + 1``."""
+    from scipy.special import betainc
+
+    from service.core.match import least_extras
+
+    def bound(k):
+        return betainc(k, n_free - k + 1, min(1.0, max(4, k) * pair_p)) * trials
+
+    want = next((k for k in range(1, n_free + 1) if bound(k) <= 1e-5), n_free + 1)
+    assert least_extras(n_free, pair_p, trials, 1e-5, 4) == want
+
+
+def test_least_extras_at_4096_px_asks_two_stars_beyond_a_triangle_of_six() -> None:
+    from service.core.match import least_extras
+
+    pair_p = np.pi * 2.5 ** 2 / 4096 ** 2  # seed 002's camera at 0.5 px
+    assert least_extras(3, pair_p, 1, 1e-5, 4) == 2  # 3 * 4.7e-6 > 1e-5: one extra star is not enough
+    assert least_extras(17, np.pi * 2.5 ** 2 / 1024 ** 2, 100, 1e-5, 4) == 3  # 136 (7.5e-5)^2 100 = 7.6e-5
+    assert least_extras(1, pair_p, 3, 1e-5, 4) == 2  # none: could_prove(3) is False there too
+
+
+def test_a_candidate_that_cannot_pass_the_bound_is_counted_not_checked(default_set_db, monkeypatch) -> None:
+    """A candidate whose screens (1.5 and NEED_SCREEN_FACTOR x 1.5 match radii) find fewer stars
+    than a check would need to pass the bound is not checked, but counts as a trial: on seed 002's
+    6-star frames with 2 false stars (4096 px, where a triangle and one star never pass) the
+    Python loop checks fewer candidates, with the same answers and the same trial counts."""
+    import service.core.methods.maxangle as maxangle
+    import service.core.verify as verify
+
+    p = PRESETS["seed002"]
+    opts = SolveOptions(centroid_sigma_px=0.5)
+    frames = [f for f in simulate_frames(p.camera, 600, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=0.5,
+                                                                   false_stars=2), rng=31)
+              if len(f.centroids) == 6][:25]
+    monkeypatch.setattr(maxangle, "COMPILED_SEARCH", False)
+    checks = [0]
+    real_check = Verifier.check
+
+    def check(self, obs_idx, cat_idx, **kw):
+        checks[0] += 1
+        return real_check(self, obs_idx, cat_idx, **kw)
+
+    monkeypatch.setattr(Verifier, "check", check)
+    runs = {}
+    for gate in (True, False):
+        if not gate:
+            monkeypatch.setattr(verify, "least_extras", lambda n_free, *a: 0)
+        checks[0] = 0
+        runs[gate] = ([solve(f.centroids, p.camera, default_set_db, options=opts) for f in frames], checks[0])
+    (gated, n_gated), (plain, n_plain) = runs[True], runs[False]
+    assert n_gated < n_plain / 2
+    for a, b in zip(gated, plain, strict=True):
+        assert (a.solved, a.message, [s[:2] for s in a.stars]) == (b.solved, b.message, [s[:2] for s in b.stars])

@@ -29,8 +29,10 @@ import numpy as np
 from numba import njit
 
 from ..attitude import wahba_kernel
+from ..match import least_extras
 from ..screen import _screen
-from ..verify import CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, Verified, field_grid, sky_grid, sky_mask, star_vec64
+from ..verify import (CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_SCREEN_FACTOR, Verified, field_grid, sky_grid, sky_mask,
+                      star_vec64)
 from .base import SolveContext
 from .maxangle_index import query_cells, query_paper
 from .quad_kernel import keep_marginal, verify_pairs
@@ -96,8 +98,8 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
                   rows, row_off, state, trial_limit, confirm_patterns, max_false_prob, strong_false_prob, max_checks,
                   max_candidates, marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials, radius_px,
                   pixel_scale, cells, key, bucket_start, tab_x, tab_y, ids, n_buckets, b_scale, screen_chord, s_cell,
-                  s_side, s_keys, s_starts, s_stars, s_columns, mask_n, mask_words, star_vec, g_cell, g_side, g_keys,
-                  g_starts, g_stars, g_columns, near_chord):
+                  s_side, s_keys, s_starts, s_stars, s_columns, mask_n, mask_words, wide_mask_n, wide_mask_words,
+                  star_vec, g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord):
     """Chunks ``c0`` to ``c1`` (of ``bounds``) of the observed triangles ``labels`` (sorted as
     ``MaxAngleMatcher.observed_triangles`` sorts them) through the look-up, the screen and the
     checks. ``state`` (int64: trials, patterns, first marginal's pattern count or -1, marginal
@@ -109,6 +111,8 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
     buf = np.empty(len(star_vec), np.int64)
     near_state = np.zeros(4)
     quick_tol = 1.5 * radius_px * pixel_scale
+    pair_p = math.pi * radius_px * radius_px / max(cams[0, 3] * cams[0, 4], 1.0)  # a match disc's share
+    wide_chord = NEED_SCREEN_FACTOR * screen_chord
     others = np.arange(n_others)
     stop = STOP_NONE
     for ci in range(c0, c1):
@@ -142,6 +146,8 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
                        star_vec, s_columns, mask_n, mask_words)
         order = np.argsort(-hits, kind="mergesort")
         least = 1 if len(obs_vec) > 3 else 0
+        # the extra pairs a check would need to pass the bound, less the stars the screen skipped
+        need = least_extras(len(obs_vec) - 3, pair_p, trials + 1, max_false_prob, 4) - (len(obs_vec) - n_others)
         for oi in range(min(k, max_checks)):
             row = order[oi]
             if hits[row] < least:
@@ -155,6 +161,10 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
             trials += 1
             if c[0] == c[1] or c[0] == c[2] or c[1] == c[2]:
                 continue
+            if hits[row] < need and _screen(obs_vec, tris[row:row + 1], cands[row:row + 1], others, wide_chord,
+                                            s_cell, s_side, s_keys, s_starts, s_stars, star_vec, s_columns,
+                                            wide_mask_n, wide_mask_words)[0] < need:
+                continue  # too few stars even in the wide screen to pass the bound (NEED_SCREEN_FACTOR)
             r = wahba_kernel(obs_vec[o], star_vec[c], np.ones(3))
             near_state[0] = 0.0  # a fresh gathering, as each Verifier.check's own call does
             ok, m_obs, m_cat, r, prob = verify_pairs(obs_vec, obs_xy, star_vec, o.copy(), c.copy(), r, g_cell,
@@ -225,6 +235,7 @@ def _static_args(matcher: Any, db: Any, cam: Any, radius_px: float) -> tuple[Any
     if got is None:
         screen_chord = radius_px * 1.5 * cam.pixel_scale_rad
         grid, mask = sky_grid(db), sky_mask(db, screen_chord)
+        wide = sky_mask(db, NEED_SCREEN_FACTOR * screen_chord)
         near_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
         g = field_grid(db, near_deg)
         cells = matcher.layout == "cells"
@@ -232,7 +243,7 @@ def _static_args(matcher: Any, db: Any, cam: Any, radius_px: float) -> tuple[Any
         got = (radius_px, float(cam.pixel_scale_rad), cells, matcher.key, matcher.bucket_start, tab_x, tab_y,
                matcher.ids, matcher.n_cells if cells else matcher.n_blocks, float(matcher.b_scale), screen_chord,
                grid.cell, grid.n_side, grid.keys, grid.starts, grid.stars, grid.columns, mask.n, mask.words,
-               star_vec64(db), g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns,
+               wide.n, wide.words, star_vec64(db), g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns,
                2 * math.sin(math.radians(near_deg) / 2))
         if len(cache) >= STATIC_CACHE_SIZE:
             cache.clear()

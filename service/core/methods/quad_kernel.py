@@ -27,11 +27,11 @@ import math
 import numpy as np
 from numba import njit
 
-from ..match import _match_rig, _refine, _wahba_pairs
+from ..match import _match_rig, _refine, _wahba_pairs, binomial_tail, least_extras
 from ..skygrid import collect_within, has_star_within
 from ..attitude import wahba_kernel
 from ..prefetch import prefetch
-from ..verify import SETTLE_FACTORS
+from ..verify import NEED_SCREEN_FACTOR, SETTLE_FACTORS
 from .quad_build import FINE_BITS, FINE_STEPS, FINGER_BITS, N_RATIO_BINS, combine_key, key_hash, row_angle, sorted_edges
 
 PERMS = np.array([[a, b, c, d] for a in range(4) for b in range(4) for c in range(4) for d in range(4)
@@ -51,23 +51,6 @@ NEAR_REUSE_COS = math.cos(math.radians(0.3))
 
 FINGER_MASK = (1 << FINGER_BITS) - 1
 STATUS_NONE, STATUS_FOUND, STATUS_MARGINAL = 0, 1, 2
-
-
-@njit(cache=True, nogil=True)
-def binomial_tail(n: int, k: int, p: float) -> float:
-    """``P[Binomial(n, p) >= k]`` (= the regularised incomplete beta ``I_p(k, n - k + 1)``)."""
-    if k <= 0:
-        return 1.0
-    if k > n or p <= 0.0:
-        return 0.0
-    if p >= 1.0:
-        return 1.0
-    lp, lq = math.log(p), math.log1p(-p)
-    base = math.lgamma(n + 1.0)
-    total = 0.0
-    for j in range(k, n + 1):
-        total += math.exp(base - math.lgamma(j + 1.0) - math.lgamma(n - j + 1.0) + j * lp + (n - j) * lq)
-    return min(total, 1.0)
 
 
 @njit(cache=True, nogil=True)
@@ -248,7 +231,7 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
                                                   s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
                                                   g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
                                                   near_chord, mount, buf, near_state, mounts, cams, dist,
-                                                  rows, row_off, radius_px, quick_tol, trials)
+                                                  rows, row_off, radius_px, quick_tol, trials, max_false_prob)
                                     ok, m_obs, m_cat, r, prob = res
                                     if ok and prob <= max_false_prob:
                                         if prob <= strong_false_prob:
@@ -295,30 +278,49 @@ def keep_marginal(marg_r, marg_prob, marg_trials, marg_off, marg_obs, marg_cat, 
 @njit(cache=True, nogil=True)
 def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s_side, s_keys, s_starts,
             s_stars, s_columns, g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, mount, buf,
-            near_state, mounts, cams, dist, rows, row_off, radius_px, quick_tol, trials):
+            near_state, mounts, cams, dist, rows, row_off, radius_px, quick_tol, trials, max_false_prob):
     """One hypothesis (observed rows ``o`` are catalogue rows ``lab``) through the verifier's
     steps. Returns ``(ok, m_obs, m_cat, r, prob)``."""
     empty = np.zeros(0, np.int64)
     r = wahba_kernel(obs_vec[o], star_vec[lab], np.ones(4))
     n_obs = len(obs_vec)
-    if n_obs > 4:  # the screen: some other bright star must land on a catalogue star
-        hits = 0
-        for m in range(n_screen):
-            if m == o[0] or m == o[1] or m == o[2] or m == o[3]:
-                continue
-            v = obs_vec[m]
-            px = r[0, 0] * v[0] + r[1, 0] * v[1] + r[2, 0] * v[2]
-            py = r[0, 1] * v[0] + r[1, 1] * v[1] + r[2, 1] * v[2]
-            pz = r[0, 2] * v[0] + r[1, 2] * v[1] + r[2, 2] * v[2]
-            if has_star_within(px, py, pz, screen_chord, s_cell, s_side, s_keys, s_starts, s_stars, star_vec,
-                               s_columns, lab[0], lab[1], lab[2]):
-                hits += 1
-                break
+    if n_obs > 4:
+        # the screen: some other bright star must land on a catalogue star, and as many as a
+        # check would need to pass the bound (least_extras, less the stars past the screened
+        # ones) unless the wide screen finds them (the verifier's NEED_SCREEN_FACTOR)
+        pair_p = math.pi * radius_px * radius_px / max(cams[0, 3] * cams[0, 4], 1.0)
+        need = max(1, least_extras(n_obs - 4, pair_p, trials, max_false_prob, 4) - (n_obs - n_screen))
+        hits = _screen_hits(obs_vec, o, lab, r, n_screen, screen_chord, need, s_cell, s_side, s_keys, s_starts,
+                            s_stars, s_columns, star_vec)
         if hits == 0:
+            return False, empty, empty, r, 1.0
+        if hits < need and _screen_hits(obs_vec, o, lab, r, n_screen, NEED_SCREEN_FACTOR * screen_chord, need,
+                                        s_cell, s_side, s_keys, s_starts, s_stars, s_columns, star_vec) < need:
             return False, empty, empty, r, 1.0
     return verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
                         near_chord, mount, buf, near_state, mounts, cams, dist, rows, row_off, radius_px,
                         quick_tol, trials)
+
+
+@njit(cache=True, nogil=True)
+def _screen_hits(obs_vec, o, lab, r, n_screen, chord, enough, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
+                 star_vec):
+    """How many of the ``n_screen`` brightest observed stars (not of the pattern ``o``) land within
+    ``chord`` of a catalogue star (not of ``lab``) under ``r``, counted up to ``enough``."""
+    hits = 0
+    for m in range(n_screen):
+        if m == o[0] or m == o[1] or m == o[2] or m == o[3]:
+            continue
+        v = obs_vec[m]
+        px = r[0, 0] * v[0] + r[1, 0] * v[1] + r[2, 0] * v[2]
+        py = r[0, 1] * v[0] + r[1, 1] * v[1] + r[2, 1] * v[2]
+        pz = r[0, 2] * v[0] + r[1, 2] * v[1] + r[2, 2] * v[2]
+        if has_star_within(px, py, pz, chord, s_cell, s_side, s_keys, s_starts, s_stars, star_vec, s_columns,
+                           lab[0], lab[1], lab[2]):
+            hits += 1
+            if hits >= enough:
+                break
+    return hits
 
 
 @njit(cache=True, nogil=True)

@@ -123,3 +123,33 @@ def _screen(obs_vec: np.ndarray, obs_tris: np.ndarray, cands: np.ndarray, others
         hits[k] = count
     return hits
 
+
+
+@njit(cache=True, nogil=True)
+def hits_under(obs_vec: np.ndarray, hyp: np.ndarray, r: np.ndarray, n_screen: int, chord: float, enough: int,
+               skip0: int, skip1: int, skip2: int, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray,
+               stars: np.ndarray, star_vec: np.ndarray, columns: np.ndarray) -> int:
+    """How many of the ``n_screen`` brightest observed stars (rows not in ``hyp``) land within
+    ``chord`` of a catalogue star (not rows ``skip0..2``) under the attitude ``r`` (ICRS ->
+    body), counted up to ``enough``: the screen of a hypothesis at the attitude its check starts
+    from (Wahba's on its own stars), where :func:`_screen`'s triangle frame, cheaper for many
+    candidates at once, puts a star far from a small triangle several match radii off."""
+    hits = 0
+    for m in range(n_screen):
+        own = False
+        for h in hyp:
+            if m == h:
+                own = True
+                break
+        if own:
+            continue
+        v = obs_vec[m]
+        px = r[0, 0] * v[0] + r[1, 0] * v[1] + r[2, 0] * v[2]
+        py = r[0, 1] * v[0] + r[1, 1] * v[1] + r[2, 1] * v[2]
+        pz = r[0, 2] * v[0] + r[1, 2] * v[1] + r[2, 2] * v[2]
+        if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, skip0, skip1,
+                           skip2):
+            hits += 1
+            if hits >= enough:
+                break
+    return hits

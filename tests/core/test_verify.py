@@ -279,3 +279,24 @@ def test_a_candidate_that_cannot_pass_the_bound_is_counted_not_checked(default_s
     assert n_gated < n_plain / 2
     for a, b in zip(gated, plain, strict=True):
         assert (a.solved, a.message, [s[:2] for s in a.stars]) == (b.solved, b.message, [s[:2] for s in b.stars])
+
+
+def test_the_wide_screen_starts_from_the_checks_attitude(default_set_db, monkeypatch) -> None:
+    """A 7-star seed 002 frame (1 px, 2 false stars; frame 773 of bench_wrong's cell) proven by
+    a small triangle whose second extra star the triangle-frame screen puts 13.8 px off (2.1 px
+    under Wahba's attitude, where the check starts): its candidate has one screen hit where the
+    bound needs two, and is checked because the wide screen, at the Wahba attitude, finds both.
+    A wide screen that finds none leaves the frame unproven."""
+    import service.core.methods.maxangle as maxangle
+
+    p = PRESETS["seed002"]
+    f = simulate_frames(p.camera, 833, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0, false_stars=2),
+                        rng=765591096082952671)[773]
+    opts = SolveOptions(centroid_sigma_px=1.0)
+    for compiled in (True, False):
+        monkeypatch.setattr(maxangle, "COMPILED_SEARCH", compiled)
+        sol = solve(f.centroids, p.camera, default_set_db, options=opts)
+        assert sol.solved and score(sol, f.quaternion, f.hip.tolist(), blends=f.blends).correct
+        assert len(sol.stars) == 5
+    monkeypatch.setattr(Verifier, "_wide_hits", lambda self, *a: 0)
+    assert not solve(f.centroids, p.camera, default_set_db, options=opts).solved

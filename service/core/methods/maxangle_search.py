@@ -30,7 +30,7 @@ from numba import njit
 
 from ..attitude import wahba_kernel
 from ..match import least_extras
-from ..screen import _screen
+from ..screen import _screen, hits_under
 from ..verify import (CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_SCREEN_FACTOR, Verified, field_grid, sky_grid, sky_mask,
                       star_vec64)
 from .base import SolveContext
@@ -98,8 +98,8 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
                   rows, row_off, state, trial_limit, confirm_patterns, max_false_prob, strong_false_prob, max_checks,
                   max_candidates, marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials, radius_px,
                   pixel_scale, cells, key, bucket_start, tab_x, tab_y, ids, n_buckets, b_scale, screen_chord, s_cell,
-                  s_side, s_keys, s_starts, s_stars, s_columns, mask_n, mask_words, wide_mask_n, wide_mask_words,
-                  star_vec, g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord):
+                  s_side, s_keys, s_starts, s_stars, s_columns, mask_n, mask_words, star_vec,
+                  g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord):
     """Chunks ``c0`` to ``c1`` (of ``bounds``) of the observed triangles ``labels`` (sorted as
     ``MaxAngleMatcher.observed_triangles`` sorts them) through the look-up, the screen and the
     checks. ``state`` (int64: trials, patterns, first marginal's pattern count or -1, marginal
@@ -161,11 +161,10 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
             trials += 1
             if c[0] == c[1] or c[0] == c[2] or c[1] == c[2]:
                 continue
-            if hits[row] < need and _screen(obs_vec, tris[row:row + 1], cands[row:row + 1], others, wide_chord,
-                                            s_cell, s_side, s_keys, s_starts, s_stars, star_vec, s_columns,
-                                            wide_mask_n, wide_mask_words)[0] < need:
-                continue  # too few stars even in the wide screen to pass the bound (NEED_SCREEN_FACTOR)
             r = wahba_kernel(obs_vec[o], star_vec[c], np.ones(3))
+            if hits[row] < need and hits_under(obs_vec, o, r, n_others, wide_chord, need, c[0], c[1], c[2], s_cell,
+                                               s_side, s_keys, s_starts, s_stars, star_vec, s_columns) < need:
+                continue  # too few stars even in the wide screen to pass the bound (NEED_SCREEN_FACTOR)
             near_state[0] = 0.0  # a fresh gathering, as each Verifier.check's own call does
             ok, m_obs, m_cat, r, prob = verify_pairs(obs_vec, obs_xy, star_vec, o.copy(), c.copy(), r, g_cell,
                                                      g_side, g_keys, g_starts, g_stars, g_columns, near_chord,
@@ -235,7 +234,6 @@ def _static_args(matcher: Any, db: Any, cam: Any, radius_px: float) -> tuple[Any
     if got is None:
         screen_chord = radius_px * 1.5 * cam.pixel_scale_rad
         grid, mask = sky_grid(db), sky_mask(db, screen_chord)
-        wide = sky_mask(db, NEED_SCREEN_FACTOR * screen_chord)
         near_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
         g = field_grid(db, near_deg)
         cells = matcher.layout == "cells"
@@ -243,7 +241,7 @@ def _static_args(matcher: Any, db: Any, cam: Any, radius_px: float) -> tuple[Any
         got = (radius_px, float(cam.pixel_scale_rad), cells, matcher.key, matcher.bucket_start, tab_x, tab_y,
                matcher.ids, matcher.n_cells if cells else matcher.n_blocks, float(matcher.b_scale), screen_chord,
                grid.cell, grid.n_side, grid.keys, grid.starts, grid.stars, grid.columns, mask.n, mask.words,
-               wide.n, wide.words, star_vec64(db), g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns,
+               star_vec64(db), g.cell, g.n_side, g.keys, g.starts, g.stars, g.columns,
                2 * math.sin(math.radians(near_deg) / 2))
         if len(cache) >= STATIC_CACHE_SIZE:
             cache.clear()

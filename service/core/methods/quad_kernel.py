@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 
 from ..match import _match_rig, _refine, _wahba_pairs, binomial_tail, least_extras
+from ..screen import hits_under
 from ..skygrid import collect_within, has_star_within
 from ..attitude import wahba_kernel
 from ..prefetch import prefetch
@@ -290,37 +291,17 @@ def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s
         # ones) unless the wide screen finds them (the verifier's NEED_SCREEN_FACTOR)
         pair_p = math.pi * radius_px * radius_px / max(cams[0, 3] * cams[0, 4], 1.0)
         need = max(1, least_extras(n_obs - 4, pair_p, trials, max_false_prob, 4) - (n_obs - n_screen))
-        hits = _screen_hits(obs_vec, o, lab, r, n_screen, screen_chord, need, s_cell, s_side, s_keys, s_starts,
-                            s_stars, s_columns, star_vec)
+        hits = hits_under(obs_vec, o, r, n_screen, screen_chord, need, lab[0], lab[1], lab[2], s_cell, s_side,
+                          s_keys, s_starts, s_stars, star_vec, s_columns)
         if hits == 0:
             return False, empty, empty, r, 1.0
-        if hits < need and _screen_hits(obs_vec, o, lab, r, n_screen, NEED_SCREEN_FACTOR * screen_chord, need,
-                                        s_cell, s_side, s_keys, s_starts, s_stars, s_columns, star_vec) < need:
+        if hits < need and hits_under(obs_vec, o, r, n_screen, NEED_SCREEN_FACTOR * screen_chord, need, lab[0],
+                                      lab[1], lab[2], s_cell, s_side, s_keys, s_starts, s_stars, star_vec,
+                                      s_columns) < need:
             return False, empty, empty, r, 1.0
     return verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
                         near_chord, mount, buf, near_state, mounts, cams, dist, rows, row_off, radius_px,
                         quick_tol, trials)
-
-
-@njit(cache=True, nogil=True)
-def _screen_hits(obs_vec, o, lab, r, n_screen, chord, enough, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
-                 star_vec):
-    """How many of the ``n_screen`` brightest observed stars (not of the pattern ``o``) land within
-    ``chord`` of a catalogue star (not of ``lab``) under ``r``, counted up to ``enough``."""
-    hits = 0
-    for m in range(n_screen):
-        if m == o[0] or m == o[1] or m == o[2] or m == o[3]:
-            continue
-        v = obs_vec[m]
-        px = r[0, 0] * v[0] + r[1, 0] * v[1] + r[2, 0] * v[2]
-        py = r[0, 1] * v[0] + r[1, 1] * v[1] + r[2, 1] * v[2]
-        pz = r[0, 2] * v[0] + r[1, 2] * v[1] + r[2, 2] * v[2]
-        if has_star_within(px, py, pz, chord, s_cell, s_side, s_keys, s_starts, s_stars, star_vec, s_columns,
-                           lab[0], lab[1], lab[2]):
-            hits += 1
-            if hits >= enough:
-                break
-    return hits
 
 
 @njit(cache=True, nogil=True)

@@ -124,7 +124,6 @@ def _screen(obs_vec: np.ndarray, obs_tris: np.ndarray, cands: np.ndarray, others
     return hits
 
 
-
 @njit(cache=True, nogil=True)
 def hits_under(obs_vec: np.ndarray, hyp: np.ndarray, r: np.ndarray, n_screen: int, chord: float, enough: int,
                skip0: int, skip1: int, skip2: int, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray,

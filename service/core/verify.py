@@ -243,7 +243,7 @@ class Verifier:
         (``n_screened`` of the frame's stars were): a candidate screened with fewer hits is
         checked only if the wide screen (:meth:`_wide_hits`) finds enough."""
         n = len(self.obs)
-        if n <= 3:
+        if n <= 3 or n > n_screened + NEED_MAX_UNSCREENED:
             return 0
         area = sum(float(c.width) * float(c.height) for c in self.obs.cameras)
         need = least_extras(n - 3, math.pi * self.match_radius_px ** 2 / max(area, 1.0), self.trials + 1,
@@ -453,6 +453,11 @@ screen's triangle frame can put a star far from a small triangle several match r
 first screen alone lost 10 frames in 47,500 at 1-2 px, a wide one in the triangle frame 1 in
 100,000 (a star 13.8 px off there, 2.1 px under Wahba's attitude). With this one the answer grid
 and ``bench.bench_wrong --frames 100000`` name what they named without the rule."""
+
+NEED_MAX_UNSCREENED = 2
+"""The rule above is applied only to frames with at most this many stars beyond those the
+screen looks at (``screen_stars + 3``): on a bigger frame the stars it skips could supply the
+extra pairs, and the bound's sum (~1.5 us on 27 free stars) would be paid on every check."""
 
 SETTLE_FACTORS = (3.0, 6.0)
 """Wide radii (in match radii) at which an accepted attitude is tested for a near miss."""

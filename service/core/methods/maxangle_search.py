@@ -31,8 +31,8 @@ from numba import njit
 from ..attitude import wahba_kernel
 from ..match import least_extras
 from ..screen import _screen, hits_under
-from ..verify import (CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_SCREEN_FACTOR, Verified, field_grid, sky_grid, sky_mask,
-                      star_vec64)
+from ..verify import (CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_MAX_UNSCREENED, NEED_SCREEN_FACTOR, Verified,
+                      field_grid, sky_grid, sky_mask, star_vec64)
 from .base import SolveContext
 from .maxangle_index import query_cells, query_paper
 from .quad_kernel import keep_marginal, verify_pairs
@@ -147,7 +147,9 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
         order = np.argsort(-hits, kind="mergesort")
         least = 1 if len(obs_vec) > 3 else 0
         # the extra pairs a check would need to pass the bound, less the stars the screen skipped
-        need = least_extras(len(obs_vec) - 3, pair_p, trials + 1, max_false_prob, 4) - (len(obs_vec) - n_others)
+        need = 0
+        if len(obs_vec) <= n_others + NEED_MAX_UNSCREENED:
+            need = least_extras(len(obs_vec) - 3, pair_p, trials + 1, max_false_prob, 4) - (len(obs_vec) - n_others)
         for oi in range(min(k, max_checks)):
             row = order[oi]
             if hits[row] < least:

@@ -22,6 +22,7 @@ checked it between chunks. The answers are those of the Python loop, which rigs 
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -185,6 +186,15 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
     return False, empty, empty, np.eye(3), 1.0, trials
 
 
+@functools.lru_cache(maxsize=256)
+def _call_plan(total: int) -> tuple[np.ndarray, tuple[tuple[int, int], ...]]:
+    """:func:`chunk_bounds` of ``total`` triangles and its :func:`calls`, kept per ``total`` (~2 us
+    of Python a search; callers do not write to them: a read-only array would be another type
+    for the compiled search)."""
+    bounds = chunk_bounds(total)
+    return bounds, tuple(calls(bounds))
+
+
 def search(matcher: Any, ctx: SolveContext, labels: np.ndarray, sides: np.ndarray, theta: np.ndarray,
            tol: np.ndarray, eps: float, max_candidates: int) -> Verified | None:
     """:meth:`MaxAngleMatcher.identify`'s search of a one-camera frame's observed triangles
@@ -194,13 +204,13 @@ def search(matcher: Any, ctx: SolveContext, labels: np.ndarray, sides: np.ndarra
     ver, obs = ctx.verifier, ctx.obs
     k = obs.kernel_arrays
     static = _static_args(matcher, ver.db, obs.cameras[0], float(ver.match_radius_px))
-    bounds = chunk_bounds(len(labels))
+    bounds, plan = _call_plan(len(labels))
     held = ver.marginal
     state = np.array([ver.trials, ver.patterns, -1 if ver._first_marginal_at is None else ver._first_marginal_at,
                       len(held), STOP_NONE], np.int64)
     limit = -1 if ver.trial_limit is None else int(ver.trial_limit)
     n_others = min(len(obs), ver.screen_stars + 3)
-    for c0, c1 in calls(bounds):
+    for c0, c1 in plan:
         if ctx.expired():
             break
         room = len(held) + CHECKS_PER_CHUNK * (c1 - c0)  # each check may keep a marginal answer
@@ -254,12 +264,12 @@ def _static_args(matcher: Any, db: Any, cam: Any, radius_px: float) -> tuple[Any
 def _marginal_arrays(held: list[Verified], room: int, n_obs: int) -> tuple[np.ndarray, ...]:
     """The marginal answers ``held`` as :func:`search_chunks` takes them, with room for
     ``room`` answers of up to ``n_obs`` pairs."""
-    marg_r = np.zeros((room, 3, 3))
-    marg_prob = np.zeros(room)
+    marg_r = np.empty((room, 3, 3))  # each answer's slots are written before they are read
+    marg_prob = np.empty(room)
     marg_off = np.zeros(room + 1, np.int64)
-    marg_obs = np.zeros(room * n_obs, np.int64)
-    marg_cat = np.zeros(room * n_obs, np.int64)
-    marg_trials = np.zeros(room, np.int64)
+    marg_obs = np.empty(room * n_obs, np.int64)
+    marg_cat = np.empty(room * n_obs, np.int64)
+    marg_trials = np.empty(room, np.int64)
     for j, v in enumerate(held):
         lo = marg_off[j]
         marg_r[j] = v.matrix

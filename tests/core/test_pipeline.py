@@ -221,6 +221,28 @@ def test_few_star_frames_searched_in_full_get_a_budget_of_hypotheses(default_set
     assert compiled.message == looped.message  # the same count of hypotheses
 
 
+def test_many_star_frames_searched_in_full_get_a_budget_of_hypotheses(default_set_db, monkeypatch) -> None:
+    """A frame of more than quad.QUERY_STARS stars that quad searched in full gets the first
+    fallback for ``MANY_STARS_MAX_TRIALS`` more hypotheses over all members, a count and not the
+    clock: with none it does not start, with a few it stops there, and the same frame gives the
+    same count whatever the machine's load."""
+    import service.core.pipeline as pipeline
+
+    p = PRESETS["seed000"]
+    frame = random_points(p.camera, 25, rng=7)
+    opts = SolveOptions(centroid_sigma_px=1.0)
+    full = solve(frame, p.camera, default_set_db, options=opts)
+    assert not full.solved and full.methods_tried == ("quad", "maxangle")
+    assert solve(frame, p.camera, default_set_db, options=opts).message == full.message
+    monkeypatch.setattr(pipeline, "MANY_STARS_MAX_TRIALS", 0)
+    assert solve(frame, p.camera, default_set_db, options=opts).methods_tried == ("quad",)
+    monkeypatch.setattr(pipeline, "MANY_STARS_MAX_TRIALS", 1)
+    capped = solve(frame, p.camera, default_set_db, options=opts)
+    assert capped.methods_tried == ("quad", "maxangle")
+    checked = int(full.message.split()[0])  # "591 candidate attitude(s) checked, none proven ..."
+    assert int(capped.message.split()[0]) < checked
+
+
 def test_an_8_star_frame_whose_bright_detections_are_false_gets_the_fallback(default_set_db) -> None:
     """An 8-star seed 002 frame with 3 false stars that ``quad`` searched in full without a
     proof (its true stars are fainter than the pattern stars of its region) is not refused: the

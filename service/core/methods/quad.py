@@ -12,7 +12,7 @@ bound; Python only converts the input and wraps the answer.
 A frame of fewer than 5 stars, or a rig of several cameras, is left to the other methods.
 After a miss, the verifier's ``exhausted`` says whether every pattern of the brightest
 ``QUERY_STARS`` stars was looked up: then the pipeline gives the frame its first fallback alone,
-within a budget (``pipeline.FEW_STARS_MAX_TRIALS``, ``EXHAUSTED_BUDGET_MS``).
+within a budget of hypotheses (``pipeline.FEW_STARS_MAX_TRIALS``, ``MANY_STARS_MAX_TRIALS``).
 """
 
 from __future__ import annotations

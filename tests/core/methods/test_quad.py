@@ -112,7 +112,7 @@ def test_auto_answers_with_quad_on_the_default_database(default_set_db) -> None:
     sol = solve(random_points(CAM, 10, rng), CAM, default_set_db, options=OPTS)
     # a frame quad searched in full gets the first fallback alone, for FEW_STARS_MAX_TRIALS hypotheses
     assert sol.status is SolveStatus.NO_SOLUTION and sol.methods_tried == ("quad", "maxangle")
-    # more points than quad looks at: the fallbacks run (within EXHAUSTED_BUDGET_MS), still no answer
+    # more points than quad looks at: the first fallback runs (within MANY_STARS_MAX_TRIALS), still no answer
     sol = solve(random_points(CAM, 25, rng), CAM, default_set_db, options=OPTS)
     assert sol.status is SolveStatus.NO_SOLUTION and "quad" in sol.methods_tried and len(sol.methods_tried) > 1
 

@@ -240,6 +240,28 @@ def least_extras(n_free: int, pair_p: float, trials: int, max_false_prob: float,
     return n_free + 1
 
 
+NEED_MAX_UNSCREENED = 2
+""":func:`needed_hits` asks its hits only of frames with at most this many stars beyond those the
+screen looks at: on a bigger frame the stars it skips could supply the extra pairs, and the
+bound's sum (~1.5 us on 27 free stars) would be paid on every check."""
+
+
+@njit(cache=True, nogil=True)
+def needed_hits(n_obs: int, n_hyp: int, n_screened: int, radius_px: float, area_px: float, trials: int,
+                max_false_prob: float, min_matches: int) -> int:
+    """The screen hits a hypothesis of ``n_hyp`` stars needs before it is checked: the extra pairs
+    a check after ``trials`` hypotheses would need to pass the bound (:func:`least_extras`, one
+    match disc of ``radius_px`` in ``area_px`` of image), less the frame's stars past the
+    ``n_screened`` the screen looked at; 0 (no demand) on a frame of more than
+    :data:`NEED_MAX_UNSCREENED` such stars or none beyond the hypothesis. Shared by the
+    verifier's loop, ``maxangle``'s compiled search and ``quad``'s kernel (see
+    ``verify.NEED_SCREEN_FACTOR`` for the wide screen that must agree)."""
+    if n_obs <= n_hyp or n_obs > n_screened + NEED_MAX_UNSCREENED:
+        return 0
+    pair_p = math.pi * radius_px * radius_px / max(area_px, 1.0)
+    return least_extras(n_obs - n_hyp, pair_p, trials, max_false_prob, min_matches) - (n_obs - n_screened)
+
+
 CROWD = 2.0
 """No other candidate within this many match radii, on either side, for a pair to count."""
 

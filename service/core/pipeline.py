@@ -471,6 +471,3 @@ def __getattr__(name: str) -> Any:
 
 
 __all__ = ["DEFAULT_OPTIONS", "SolveOptions", "solve", "solve_image", "solve_rig", "tan_wcs"]
-
-
-

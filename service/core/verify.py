@@ -31,7 +31,7 @@ from scipy.special import betainc
 
 from .attitude import ARCSEC_PER_RAD, wahba_kernel, wahba_svd
 from .camera import Camera
-from .match import RigArrays, least_extras, match_rig, refine, rig_arrays
+from .match import RigArrays, match_rig, needed_hits, refine, rig_arrays
 from .navdb.reader import NavDatabase
 from .screen import hits_under, screen_hits
 from .skygrid import SkyGrid, build_sky_grid
@@ -238,22 +238,16 @@ class Verifier:
         return None
 
     def _needed_extras(self, n_screened: int) -> int:
-        """The extra pairs a check would need now to pass the bound
-        (:func:`~service.core.match.least_extras`), less the stars the screen did not look at
-        (``n_screened`` of the frame's stars were): a candidate screened with fewer hits is
-        checked only if the wide screen (:meth:`_wide_hits`) finds enough."""
-        n = len(self.obs)
-        if n <= 3 or n > n_screened + NEED_MAX_UNSCREENED:
-            return 0
+        """The screen hits a candidate needs now (:func:`~service.core.match.needed_hits`); one
+        screened with fewer is checked only if the wide screen (:meth:`_wide_hits`) finds enough."""
         area = sum(float(c.width) * float(c.height) for c in self.obs.cameras)
-        need = least_extras(n - 3, math.pi * self.match_radius_px ** 2 / max(area, 1.0), self.trials + 1,
-                            self.max_false_prob, self.min_matches)
-        return need - (n - n_screened)
+        return needed_hits(len(self.obs), 3, n_screened, float(self.match_radius_px), area, self.trials + 1,
+                           float(self.max_false_prob), int(self.min_matches))
 
     def _wide_hits(self, obs_tri: IntArray, cand: IntArray, others: IntArray, enough: int) -> int:
         """Screen hits of one candidate at its check's starting attitude (Wahba's on its three
         stars) and ``NEED_SCREEN_FACTOR`` times the screen's chord, counted up to ``enough``
-        (:func:`~service.core.screen.hits_under`)."""
+        (:func:`~service.core.screen.hits_under`, as ``maxangle``'s compiled search calls it)."""
         stars = star_vec64(self.db)
         o = np.asarray(obs_tri, dtype=np.int64)
         c = np.asarray(cand, dtype=np.int64)
@@ -261,7 +255,7 @@ class Verifier:
         g = sky_grid(self.db)
         chord = NEED_SCREEN_FACTOR * 1.5 * self.match_radius_px * self.obs.pixel_scale_rad
         return int(hits_under(np.ascontiguousarray(self.obs.vec, dtype=np.float64), o, r, len(others), chord, enough,
-                              int(c[0]), int(c[1]), int(c[2]), g.cell, g.n_side, g.keys, g.starts, g.stars, g.vec,
+                              int(c[0]), int(c[1]), int(c[2]), g.cell, g.n_side, g.keys, g.starts, g.stars, stars,
                               g.columns))
 
     def _screen(self, obs_tris: IntArray, cands: IntArray, others: IntArray) -> IntArray:
@@ -446,18 +440,13 @@ CHECKS_PER_CHUNK = 8
 
 NEED_SCREEN_FACTOR = 2.0
 """A candidate whose screen (1.5 match radii) finds fewer stars than a check would need to pass
-the coincidence bound (:func:`~service.core.match.least_extras`) is checked only if a second
+the coincidence bound (:func:`~service.core.match.needed_hits`) is checked only if a second
 screen, this many times wider and at the attitude the check starts from (Wahba's on the
 candidate's own stars; :func:`~service.core.screen.hits_under`), finds enough. The first
 screen's triangle frame can put a star far from a small triangle several match radii off: the
 first screen alone lost 10 frames in 47,500 at 1-2 px, a wide one in the triangle frame 1 in
 100,000 (a star 13.8 px off there, 2.1 px under Wahba's attitude). With this one the answer grid
 and ``bench.bench_wrong --frames 100000`` name what they named without the rule."""
-
-NEED_MAX_UNSCREENED = 2
-"""The rule above is applied only to frames with at most this many stars beyond those the
-screen looks at (``screen_stars + 3``): on a bigger frame the stars it skips could supply the
-extra pairs, and the bound's sum (~1.5 us on 27 free stars) would be paid on every check."""
 
 SETTLE_FACTORS = (3.0, 6.0)
 """Wide radii (in match radii) at which an accepted attitude is tested for a near miss."""

@@ -145,4 +145,3 @@ def own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centro
         order = np.argsort(mag[near])[:20]
         frames.append(Centroids(xy[order], 10.0 ** (-0.4 * mag[near][order])))
     return frames
-

@@ -272,7 +272,7 @@ def test_a_candidate_that_cannot_pass_the_bound_is_counted_not_checked(default_s
     runs = {}
     for gate in (True, False):
         if not gate:
-            monkeypatch.setattr(verify, "least_extras", lambda n_free, *a: 0)
+            monkeypatch.setattr(verify, "needed_hits", lambda *a: 0)
         checks[0] = 0
         runs[gate] = ([solve(f.centroids, p.camera, default_set_db, options=opts) for f in frames], checks[0])
     (gated, n_gated), (plain, n_plain) = runs[True], runs[False]

@@ -30,10 +30,10 @@ import numpy as np
 from numba import njit
 
 from ..attitude import wahba_kernel
-from ..match import least_extras
+from ..match import needed_hits
 from ..screen import _screen, hits_under
-from ..verify import (CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_MAX_UNSCREENED, NEED_SCREEN_FACTOR, Verified,
-                      field_grid, sky_grid, sky_mask, star_vec64)
+from ..verify import (CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_SCREEN_FACTOR, Verified, field_grid, sky_grid,
+                      sky_mask, star_vec64)
 from .base import SolveContext
 from .maxangle_index import query_cells, query_paper
 from .quad_kernel import keep_marginal, verify_pairs
@@ -112,7 +112,6 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
     buf = np.empty(len(star_vec), np.int64)
     near_state = np.zeros(4)
     quick_tol = 1.5 * radius_px * pixel_scale
-    pair_p = math.pi * radius_px * radius_px / max(cams[0, 3] * cams[0, 4], 1.0)  # a match disc's share
     wide_chord = NEED_SCREEN_FACTOR * screen_chord
     others = np.arange(n_others)
     stop = STOP_NONE
@@ -147,10 +146,7 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
                        star_vec, s_columns, mask_n, mask_words)
         order = np.argsort(-hits, kind="mergesort")
         least = 1 if len(obs_vec) > 3 else 0
-        # the extra pairs a check would need to pass the bound, less the stars the screen skipped
-        need = 0
-        if len(obs_vec) <= n_others + NEED_MAX_UNSCREENED:
-            need = least_extras(len(obs_vec) - 3, pair_p, trials + 1, max_false_prob, 4) - (len(obs_vec) - n_others)
+        need = needed_hits(len(obs_vec), 3, n_others, radius_px, cams[0, 3] * cams[0, 4], trials + 1, max_false_prob, 4)
         for oi in range(min(k, max_checks)):
             row = order[oi]
             if hits[row] < least:

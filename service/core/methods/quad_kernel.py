@@ -27,12 +27,12 @@ import math
 import numpy as np
 from numba import njit
 
-from ..match import _match_rig, _refine, _wahba_pairs, binomial_tail, least_extras
+from ..match import _match_rig, _refine, _wahba_pairs, binomial_tail, needed_hits
 from ..screen import hits_under
 from ..skygrid import collect_within, has_star_within
 from ..attitude import wahba_kernel
 from ..prefetch import prefetch
-from ..verify import NEED_MAX_UNSCREENED, NEED_SCREEN_FACTOR, SETTLE_FACTORS
+from ..verify import NEED_SCREEN_FACTOR, SETTLE_FACTORS
 from .quad_build import FINE_BITS, FINE_STEPS, FINGER_BITS, N_RATIO_BINS, combine_key, key_hash, row_angle, sorted_edges
 
 PERMS = np.array([[a, b, c, d] for a in range(4) for b in range(4) for c in range(4) for d in range(4)
@@ -287,12 +287,9 @@ def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s
     n_obs = len(obs_vec)
     if n_obs > 4:
         # the screen: some other bright star must land on a catalogue star, and as many as a
-        # check would need to pass the bound (least_extras, less the stars past the screened
-        # ones) unless the wide screen finds them (the verifier's NEED_SCREEN_FACTOR)
-        need = 1
-        if n_obs <= n_screen + NEED_MAX_UNSCREENED:  # (a bigger frame's unscreened stars could supply them)
-            pair_p = math.pi * radius_px * radius_px / max(cams[0, 3] * cams[0, 4], 1.0)
-            need = max(1, least_extras(n_obs - 4, pair_p, trials, max_false_prob, 4) - (n_obs - n_screen))
+        # check would need to pass the bound (needed_hits) unless the wide screen finds them
+        # (the verifier's NEED_SCREEN_FACTOR)
+        need = max(1, needed_hits(n_obs, 4, n_screen, radius_px, cams[0, 3] * cams[0, 4], trials, max_false_prob, 4))
         hits = hits_under(obs_vec, o, r, n_screen, screen_chord, need, lab[0], lab[1], lab[2], s_cell, s_side,
                           s_keys, s_starts, s_stars, star_vec, s_columns)
         if hits == 0:

@@ -36,7 +36,7 @@ from ..verify import (CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_SCREEN_FACTOR, Ver
                       sky_mask, star_vec64)
 from .base import SolveContext
 from .maxangle_index import query_cells, query_paper
-from .quad_kernel import keep_marginal, verify_pairs
+from .quad_kernel import keep_marginal, names_marginal, verify_pairs
 
 TRIANGLES_PER_CALL = 64
 """Observed triangles one call may search before Python checks the clock again (a 7-star frame's
@@ -72,26 +72,6 @@ def calls(bounds: np.ndarray) -> list[tuple[int, int]]:
         out.append((c0, c1))
         c0 = c1
     return out
-
-
-@njit(cache=True, nogil=True)
-def _named(o, c, marg_off, marg_obs, marg_cat, n_marg):
-    """Does a marginal answer pair every observed row ``o[i]`` with catalogue row ``c[i]``
-    (``Verifier.names_marginal``)?"""
-    for k in range(n_marg):
-        every = True
-        for i in range(len(o)):
-            hit = False
-            for j in range(marg_off[k], marg_off[k + 1]):
-                if marg_obs[j] == o[i]:
-                    hit = marg_cat[j] == c[i]
-                    break
-            if not hit:
-                every = False
-                break
-        if every:
-            return True
-    return False
 
 
 @njit(cache=True, nogil=True)
@@ -154,7 +134,7 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
             if trial_limit >= 0 and trials >= trial_limit:
                 break
             o, c = tris[row], cands[row]
-            if n_marg > 0 and _named(o, c, marg_off, marg_obs, marg_cat, n_marg):
+            if n_marg > 0 and names_marginal(o, c, marg_off, marg_obs, marg_cat, n_marg, 0):
                 trials += 1
                 continue
             trials += 1

@@ -148,3 +148,32 @@ def test_costly_patterns_wait_for_every_cheap_one(default_set_db) -> None:
     res, obs = _search(default_set_db, "seed003", frame, 2.0)
     assert res[0] == STATUS_FOUND and res[16] > PATTERN_PROBE_CAP  # a deferred pattern proved it
     assert 17702 in {int(frame.hip[obs.index[o]]) for o in res[1]}  # Alcyone's quad
+
+
+def test_a_repeat_of_an_answer_that_pairs_every_star_is_counted_not_checked(default_set_db) -> None:
+    """On seed 002's 4096-px camera a 6-star frame's 4 + 2 pairs are a marginal answer, and each of
+    its 15 patterns reaches that identification again: each is a trial (every later bound counts
+    it), but none is checked again, so one marginal answer is held (names_marginal)."""
+    from service.core.presets import PRESETS
+
+    p2 = PRESETS["seed002"]
+    frames = [f for f in simulate_frames(p2.camera, 400, SimConfig(mag_limit=p2.mag_limit, centroid_noise_px=0.5),
+                                         rng=11) if len(f.centroids) == 6][:5]
+    assert len(frames) == 5
+    for frame in frames:
+        res, obs = _search(default_set_db, "seed002", frame, 0.5)
+        status, trials, marg_prob, marg_obs = res[0], res[7], res[11], res[13]
+        assert status == 2 and len(marg_prob) == 1 and trials > 1
+        assert sorted(marg_obs.tolist()) == list(range(6))  # the answer pairs every star
+
+
+def test_names_marginal_asks_for_an_answer_of_enough_pairs() -> None:
+    from service.core.methods.quad_kernel import names_marginal
+
+    off = np.array([0, 5, 11], np.int64)
+    m_obs = np.array([0, 1, 2, 3, 4, 0, 1, 2, 3, 4, 5], np.int64)
+    m_cat = np.array([10, 11, 12, 13, 14, 10, 11, 12, 13, 14, 15], np.int64)
+    o, c = np.array([0, 1, 2, 3], np.int64), np.array([10, 11, 12, 13], np.int64)
+    assert names_marginal(o, c, off, m_obs, m_cat, 1, 5) and not names_marginal(o, c, off, m_obs, m_cat, 1, 6)
+    assert names_marginal(o, c, off, m_obs, m_cat, 2, 6)
+    assert not names_marginal(o, np.array([10, 11, 13, 12], np.int64), off, m_obs, m_cat, 2, 0)

@@ -134,7 +134,7 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
             if trial_limit >= 0 and trials >= trial_limit:
                 break
             o, c = tris[row], cands[row]
-            if n_marg > 0 and names_marginal(o, c, marg_off, marg_obs, marg_cat, n_marg, 0):
+            if n_marg > 0 and names_marginal(o, c, marg_off, marg_obs, marg_cat, n_marg):
                 trials += 1
                 continue
             trials += 1

@@ -16,12 +16,14 @@ best) and tried as a hypothesis exactly as :class:`~service.core.verify.Verifier
 Every candidate that passes the angle test is a trial. A strong answer (``P <=
 strong_false_prob``) ends the search; a marginal one (``P <= max_false_prob``) is kept, and the
 search goes on for ``confirm_patterns`` more patterns, as the verifier does. A candidate whose
-four pairs a kept marginal answer already makes, where that answer pairs every star of the
-frame, is counted as a trial but not checked (:func:`names_marginal`): its check could only
-reach the same pairs again. (Seed 002's 6-star frames, where 4 + 2 stars are marginal at 4096
-px, checked the same identification through each of their 15 patterns: 82 -> 36 us a search.
-Without the every-star condition a later check sometimes pairs one more star, and 14 frames of
-47,500 named one star fewer.) The work is
+four pairs a kept marginal answer already makes is counted as a trial but not checked
+(:func:`names_marginal`) when that answer is *closed*: it pairs every star of the frame, or no
+unpaired star lies within :data:`RECHECK_REACH` match radii of a catalogue star under its
+attitude (:func:`could_pair_more`), so a check from another pattern could only reach the same
+pairs again. (Seed 002's 6-star frames, where 4 + 2 stars are marginal at 4096 px, checked the
+same identification through each of their 15 patterns: 82 -> 36 us a search. Without the
+closed condition a later check sometimes pairs one more star, and 14 frames of 47,500 named one
+star fewer.) The work is
 bounded inside the loop (``max_probes`` hash probes, ``max_checks`` full verifications), not by
 a clock between Python batches.
 """
@@ -137,6 +139,8 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
     marg_r = np.zeros((MAX_MARGINAL, 3, 3))
     marg_prob = np.zeros(MAX_MARGINAL)
     marg_trials = np.zeros(MAX_MARGINAL, np.int64)
+    marg_closed = np.zeros(MAX_MARGINAL, np.bool_)  # no check could pair more (see the docstring)
+    reach_chord = RECHECK_REACH * radius_rad
     marg_off = np.zeros(MAX_MARGINAL + 1, np.int64)
     marg_obs = np.zeros(MAX_MARGINAL * n_obs, np.int64)
     marg_cat = np.zeros(MAX_MARGINAL * n_obs, np.int64)
@@ -233,9 +237,13 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
                                         break
                                 if fits and _label(obs_vec, o, star_vec, c, tol, lab):
                                     trials += 1
-                                    if n_marg > 0 and names_marginal(o, lab, marg_off, marg_obs, marg_cat, n_marg,
-                                                                     n_obs):
-                                        continue  # an answer that pairs every star, reached again: see the docstring
+                                    repeat = False
+                                    for k in range(n_marg):
+                                        if marg_closed[k] and names_answer(o, lab, marg_off, marg_obs, marg_cat, k):
+                                            repeat = True
+                                            break
+                                    if repeat:
+                                        continue  # a closed answer reached again: see the docstring
                                     checks += 1
                                     res = _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord,
                                                   s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
@@ -251,6 +259,9 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
                                         if n_marg < MAX_MARGINAL:
                                             n_marg = keep_marginal(marg_r, marg_prob, marg_trials, marg_off, marg_obs,
                                                                    marg_cat, n_marg, r, prob, trials, m_obs, m_cat)
+                                            marg_closed[n_marg - 1] = len(m_obs) == n_obs or not could_pair_more(
+                                                obs_vec, m_obs, r, reach_chord, s_cell, s_side, s_keys, s_starts,
+                                                s_stars, star_vec, s_columns)
                                         if first_marg < 0:
                                             first_marg = n_pat
                             for i in range(6):  # next bin combination
@@ -271,25 +282,27 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
 
 
 @njit(cache=True, nogil=True)
-def names_marginal(o, c, marg_off, marg_obs, marg_cat, n_marg, min_pairs):
-    """Does one of the ``n_marg`` marginal answers of at least ``min_pairs`` pairs pair every
-    observed row ``o[i]`` with catalogue row ``c[i]``
-    (:meth:`~service.core.verify.Verifier.names_marginal`)? Such a hypothesis is counted as a
-    trial and not checked, in ``quad``'s kernel and ``maxangle``'s search alike."""
-    for k in range(n_marg):
-        if marg_off[k + 1] - marg_off[k] < min_pairs:
-            continue
-        every = True
-        for i in range(len(o)):
-            hit = False
-            for j in range(marg_off[k], marg_off[k + 1]):
-                if marg_obs[j] == o[i]:
-                    hit = marg_cat[j] == c[i]
-                    break
-            if not hit:
-                every = False
+def names_answer(o, c, marg_off, marg_obs, marg_cat, k):
+    """Does marginal answer ``k`` (pairs ``marg_obs``/``marg_cat`` in ``marg_off[k]:marg_off[k + 1]``)
+    pair every observed row ``o[i]`` with catalogue row ``c[i]``?"""
+    for i in range(len(o)):
+        hit = False
+        for j in range(marg_off[k], marg_off[k + 1]):
+            if marg_obs[j] == o[i]:
+                hit = marg_cat[j] == c[i]
                 break
-        if every:
+        if not hit:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def names_marginal(o, c, marg_off, marg_obs, marg_cat, n_marg):
+    """Does one of the ``n_marg`` marginal answers pair every observed row ``o[i]`` with catalogue
+    row ``c[i]`` (:meth:`~service.core.verify.Verifier.names_marginal`, ``maxangle``'s compiled
+    search)?"""
+    for k in range(n_marg):
+        if names_answer(o, c, marg_off, marg_obs, marg_cat, k):
             return True
     return False
 

@@ -167,13 +167,31 @@ def test_a_repeat_of_an_answer_that_pairs_every_star_is_counted_not_checked(defa
         assert sorted(marg_obs.tolist()) == list(range(6))  # the answer pairs every star
 
 
-def test_names_marginal_asks_for_an_answer_of_enough_pairs() -> None:
-    from service.core.methods.quad_kernel import names_marginal
+def test_a_repeat_of_an_answer_that_no_check_could_grow_is_not_checked(default_set_db) -> None:
+    """Seed 002 at 1 px with 5 false stars: the marginal answer pairs the true stars, and no
+    unpaired (false) star lies near a catalogue star under its attitude (could_pair_more), so the
+    answer is closed and the other patterns of its stars are counted, not checked: one answer is
+    held where 3-4 were (session 16's kernel, these frames)."""
+    from service.core.presets import PRESETS
+
+    p2 = PRESETS["seed002"]
+    config = SimConfig(mag_limit=p2.mag_limit, centroid_noise_px=1.0, false_stars=5)
+    frames = simulate_frames(p2.camera, 300, config, rng=5)
+    for index in (3, 9, 38, 54, 76):
+        frame = frames[index]
+        res, obs = _search(default_set_db, "seed002", frame, 1.0)
+        status, trials, marg_prob, marg_obs = res[0], res[7], res[11], res[13]
+        assert status == 2 and len(marg_prob) == 1 and trials >= 4
+        assert len(marg_obs) < len(frame.centroids) and all(frame.hip[obs.index[o]] >= 0 for o in marg_obs)
+
+
+def test_names_answer_asks_every_pair_of_the_hypothesis() -> None:
+    from service.core.methods.quad_kernel import names_answer, names_marginal
 
     off = np.array([0, 5, 11], np.int64)
-    m_obs = np.array([0, 1, 2, 3, 4, 0, 1, 2, 3, 4, 5], np.int64)
-    m_cat = np.array([10, 11, 12, 13, 14, 10, 11, 12, 13, 14, 15], np.int64)
-    o, c = np.array([0, 1, 2, 3], np.int64), np.array([10, 11, 12, 13], np.int64)
-    assert names_marginal(o, c, off, m_obs, m_cat, 1, 5) and not names_marginal(o, c, off, m_obs, m_cat, 1, 6)
-    assert names_marginal(o, c, off, m_obs, m_cat, 2, 6)
-    assert not names_marginal(o, np.array([10, 11, 13, 12], np.int64), off, m_obs, m_cat, 2, 0)
+    m_obs = np.array([0, 1, 2, 3, 4, 0, 1, 2, 3, 5, 4], np.int64)
+    m_cat = np.array([10, 11, 12, 13, 14, 10, 11, 12, 13, 15, 16], np.int64)
+    o, c = np.array([0, 1, 2, 4], np.int64), np.array([10, 11, 12, 14], np.int64)
+    assert names_answer(o, c, off, m_obs, m_cat, 0) and not names_answer(o, c, off, m_obs, m_cat, 1)
+    assert names_marginal(o, c, off, m_obs, m_cat, 2) and not names_marginal(o, c, off[1:] - 5, m_obs[5:], m_cat[5:], 1)
+    assert not names_marginal(np.array([0, 1, 2, 5], np.int64), c, off, m_obs, m_cat, 2)

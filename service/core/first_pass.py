@@ -54,6 +54,7 @@ from .trimmed import MIN_SIGMA_PX, SUSPECT_SIGMA, _robust_sigma_px
 from .verify import (
     NEAR_MARGIN_DEG,
     Observation,
+    Verified,
     Verifier,
     camera_probes,
     field_grid,
@@ -136,11 +137,15 @@ def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigm
         search = _unpack_search(ints, floats)
         return FirstPass(search, False, member, _NO_ROWS, _NO_ROWS, search[5], 1.0, _NO_RES, 0.0, (0.0, 0.0, 0.0),
                          int(search[7]))
+    return _solved(ints, floats, deepest if used_deep else member)
+
+
+def _solved(ints: np.ndarray, floats: np.ndarray, db: NavDatabase) -> FirstPass:
+    """A solved :class:`FirstPass` from the arrays :func:`settle_kernel` packs (rows of ``db``)."""
     trials, n = ints[:2].tolist()
     prob, rms, sd0, sd1, sd2 = floats[9:14].tolist()
-    return FirstPass(_SOLVED_SEARCH, True, deepest if used_deep else member, ints[2:2 + n], ints[2 + n:2 + 2 * n],
-                     floats[:9].reshape(3, 3), prob, floats[14:14 + n], rms, (sd0, sd1, sd2), trials,
-                     (ints[2 + 2 * n:], floats[14 + n:]))
+    return FirstPass(_SOLVED_SEARCH, True, db, ints[2:2 + n], ints[2 + n:2 + 2 * n], floats[:9].reshape(3, 3), prob,
+                     floats[14:14 + n], rms, (sd0, sd1, sd2), trials, (ints[2 + 2 * n:], floats[14 + n:]))
 
 
 def _unpack_search(ints: np.ndarray, floats: np.ndarray) -> tuple[Any, ...]:
@@ -197,15 +202,37 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
                  match_radius_px: float | None, max_false_prob: float) -> tuple[Any, ...]:
     """The kernel's arguments that depend only on the databases, the camera and the options,
     kept per member (every frame of a camera passes the same; building them costs ~5 us)."""
-    scale = cam.pixel_scale_rad
-    key = (id(deepest), cam.diagonal_fov_deg, scale, sigma_px, match_radius_px, max_false_prob)
+    key = (id(deepest), cam.diagonal_fov_deg, cam.pixel_scale_rad, sigma_px, match_radius_px, max_false_prob)
     cache = member.__dict__.setdefault("_first_pass_args", {})
     got = cache.get(key)
     if got is not None and got[0] is deepest:
         return got[1]
     qm: QuadMatcher = get_matcher(member, "quad")
-    radius = match_radius_px or max(2.5, 3.0 * sigma_px)
+    settle = _settle_args(member, deepest, cam, sigma_px, match_radius_px, max_false_prob)
+    star_vec, near_chord, radius, scale = settle[:4]
+    near = field_grid(member, cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG).kernel_args()
     tol = (3.0 * math.sqrt(2.0) * sigma_px + 0.5) * scale
+    static = (QUERY_STARS, tol, qm.patterns, qm.table, qm.ratio_bin, qm.edge_bin, qm.edge_max, star_vec,
+              *qm.screen, *near, near_chord, radius, scale, float(max_false_prob),
+              float(Verifier.strong_false_prob), int(Verifier.confirm_patterns), int(Verifier.screen_stars),
+              MAX_PROBES, MAX_CHECKS, *settle[4:-1], 3.0 * radius * scale, settle[-1])
+    if len(cache) >= STATIC_CACHE_SIZE:
+        cache.clear()
+    cache[key] = (deepest, static)
+    return static
+
+
+def _settle_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: float,
+                 match_radius_px: float | None, max_false_prob: float) -> tuple[Any, ...]:
+    """:func:`settle_kernel`'s arguments from ``star_vec`` on (the member's, the deepest's and the
+    options'), kept per member as :func:`_static_args` keeps its own."""
+    scale = cam.pixel_scale_rad
+    key = (id(deepest), cam.diagonal_fov_deg, scale, sigma_px, match_radius_px, max_false_prob)
+    cache = member.__dict__.setdefault("_settle_args", {})
+    got = cache.get(key)
+    if got is not None and got[0] is deepest:
+        return got[1]
+    radius = match_radius_px or max(2.5, 3.0 * sigma_px)
     sigma_rad = sigma_px * scale
     answer_radius = match_radius_px or max(2.5, 3.0 * sigma_rad / scale)  # as finish.solution has it
     near_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
@@ -214,21 +241,35 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
     field_chord = 2 * math.sin(math.radians(field_deg) / 2)
     has_deep = deepest is not member
     deep = deeper_arrays(member, deepest) if has_deep else _NO_DEEPER
-    near = field_grid(member, near_deg).kernel_args()
     deep_near = field_grid(deepest, near_deg).kernel_args() if has_deep else _NO_GRID
     strong = min(max_false_prob, Verifier.strong_false_prob)
-    static = (QUERY_STARS, tol, qm.patterns, qm.table, qm.ratio_bin, qm.edge_bin, qm.edge_max, qm.star_vec,
-              *qm.screen, *near, near_chord, float(radius), float(scale), float(max_false_prob),
-              float(Verifier.strong_false_prob), int(Verifier.confirm_patterns), int(Verifier.screen_stars),
-              MAX_PROBES, MAX_CHECKS, has_deep, deep.rows, deep.star_vec, *deep_near, float(strong),
-              *field_grid(member, field_deg).kernel_args(), star_mags(member), star_mags(deepest),
-              field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF, star_hips(member),
-              star_hips(deepest), *hidden_neighbours(member), *hidden_neighbours(deepest),
-              3.0 * radius * scale, SUSPECT_SIGMA * max(float(sigma_px), MIN_SIGMA_PX))
+    args = (star_vec64(member), near_chord, float(radius), float(scale), has_deep, deep.rows, deep.star_vec,
+            *deep_near, float(strong), *field_grid(member, field_deg).kernel_args(), star_mags(member),
+            star_mags(deepest), field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF,
+            star_hips(member), star_hips(deepest), *hidden_neighbours(member), *hidden_neighbours(deepest),
+            SUSPECT_SIGMA * max(float(sigma_px), MIN_SIGMA_PX))
     if len(cache) >= STATIC_CACHE_SIZE:
         cache.clear()
-    cache[key] = (deepest, static)
-    return static
+    cache[key] = (deepest, args)
+    return args
+
+
+def settle(obs: Observation, member: NavDatabase, deepest: NavDatabase, found: Verified, sigma_px: float,
+           match_radius_px: float | None, max_false_prob: float) -> FirstPass | None:
+    """The answer of ``found``, proven on ``member`` by a method other than the first pass
+    (one camera, no epoch or aberration), as the first pass finishes its own: re-verified
+    against ``deepest``, checked and fitted in one compiled call (:func:`settle_kernel`). None
+    where the general path must re-examine the fit (``trimmed_basin``)."""
+    k = obs.kernel_arrays
+    flux = obs.flux if obs.flux is not None else _NO_FLUX
+    ok, used_deep, ints, floats = settle_kernel(
+        obs.vec, obs.xy, flux, obs.flux is not None, k.mounts, k.cams, k.dist, k.rows, k.row_off, obs.index,
+        np.array(found.obs, np.int64), np.array(found.cat, np.int64), np.array(found.matrix, np.float64),
+        float(found.false_prob), int(found.n_trials),
+        *_settle_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob))
+    if not ok:
+        return None
+    return _solved(ints, floats, deepest if used_deep else member)
 
 
 _NO_FLUX = np.zeros(0)
@@ -276,6 +317,29 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
     if k < 0:
         ints, floats = _pack_search(search)
         return False, False, ints, floats
+    ok, used_deep, ints, floats = settle_kernel(
+        obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, obs_index, m_obs, m_cat, r, prob, trials,
+        star_vec, near_chord, radius_px, pixel_scale, has_deep, deep_rows, d_vec, d_cell, d_side, d_keys, d_starts,
+        d_stars, d_columns, strong, a_cell, a_side, a_keys, a_starts, a_stars, a_columns, mag, d_mag, field_chord,
+        answer_radius, sigma_px, sigma_rad, prior_dof, hip, d_hip, hidden, hidden_lim, d_hidden, d_hidden_lim,
+        suspect_px)
+    if not ok:
+        ints, floats = _pack_search(search)  # a fit the general path re-examines (trimmed_basin)
+        return False, False, ints, floats
+    return True, used_deep, ints, floats
+
+
+@njit(cache=True, nogil=True)
+def settle_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, obs_index, m_obs, m_cat, r, prob,
+                  trials, star_vec, near_chord, radius_px, pixel_scale, has_deep, deep_rows, d_vec, d_cell, d_side,
+                  d_keys, d_starts, d_stars, d_columns, strong, a_cell, a_side, a_keys, a_starts, a_stars, a_columns,
+                  mag, d_mag, field_chord, answer_radius, sigma_px, sigma_rad, prior_dof, hip, d_hip, hidden,
+                  hidden_lim, d_hidden, d_hidden_lim, suspect_px):
+    """From a proven identification (observed rows ``m_obs`` are catalogue rows ``m_cat`` of the
+    searched member, attitude ``r``, bound ``prob`` after ``trials`` hypotheses) to the answer:
+    steps 2-4 of the module's docstring. Returns ``(ok, used_deep, ints, floats)`` packed as
+    :func:`first_pass_kernel`'s solved answer; ``ok`` False for a fit the general path must
+    re-examine (``trimmed_basin``: its own noise over ``suspect_px``)."""
     used_deep = False
     vec, cell, side, keys, starts, stars, columns, mags, hid, hid_lim = star_vec, a_cell, a_side, a_keys, a_starts, \
         a_stars, a_columns, mag, hidden, hidden_lim
@@ -303,8 +367,7 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
                 vec, cell, side, keys, starts, stars, columns, mags, hid, hid_lim = d_vec, d_cell, d_side, d_keys, \
                     d_starts, d_stars, d_columns, d_mag, d_hidden, d_hidden_lim
     if len(m_obs) >= TRIM_MIN_PAIRS and _robust_sigma_px(obs_vec, vec, m_obs, m_cat, r, pixel_scale) > suspect_px:
-        ints, floats = _pack_search(search)  # a fit the general path re-examines (trimmed_basin)
-        return False, False, ints, floats
+        return False, False, np.zeros(0, np.int64), np.zeros(0)
     m_obs, m_cat, moved = answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, vec, mags, cell, side, keys, starts,
                                         stars, columns, field_chord, mounts[0], cams[0], dist[0], answer_radius,
                                         sigma_px, hid, hid_lim)

@@ -16,22 +16,24 @@ from typing import Any
 import numpy as np
 
 from .answer import recheck
-from .attitude import quat_to_matrix, radec_roll
+from .attitude import quat_to_matrix
 from .camera import Camera, brightest_first
 from .errors import InvalidInputError
 from .finish import solution
-from .first_pass import deeper_arrays, first_pass
+from .fallback_pass import Chain, fallbacks
+from .first_pass import deeper_arrays, first_pass, settle
 from .match import IDENTITY_MOUNTING
 from .methods import SolveContext, get_matcher
 from .methods.quad import MIN_STARS as QUAD_MIN_STARS
 from .methods.quad import QUERY_STARS
-from .methods.quad_kernel import RECHECK_REACH, could_pair_more
+from .methods.quad_kernel import RECHECK_REACH, STATUS_NONE, could_pair_more
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .plan import fallback_next, search_plan
 from .refusal import SPARSE_ADVICE_STARS, no_solution, refusal, sparse_advice
 from .solution import solution_of
 from .types import Centroids, Solution
 from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier, field_grid, star_vec64
+from .wcs import tan_wcs
 
 Quaternion = Sequence[float]
 
@@ -138,6 +140,16 @@ COMPILED_FIRST_PASS = True
 """Run ``auto``'s first pass as one compiled call (:mod:`service.core.first_pass`); False takes
 the same steps through the general path (four compiled calls; the tests compare the two)."""
 
+COMPILED_FALLBACKS = True
+"""Run the fallbacks of a small frame after the first pass's exhaustive miss as one compiled call
+(:mod:`service.core.fallback_pass`); False takes the general loop (the tests compare the two)."""
+
+COMPILED_SETTLE = True
+"""Finish an answer that another method proved (one camera, no epoch or aberration) as the first
+pass finishes its own, in one compiled call (:func:`~service.core.first_pass.settle`: the
+deeper member's recheck, the answer's checks, the fit); False takes the general path
+(``_refine``, :func:`~service.core.finish.solution`; the tests compare the two)."""
+
 
 def solve(
     centroids: Centroids,
@@ -203,6 +215,7 @@ def solve_rig(
         sigmas.append(options.centroid_sigma_px * options.retry_sigma_factor)
     plain = hint is None and options.epoch is None and options.observer_velocity_km_s is None
     quad_first = bool(plan) and plan[0][1][:1] == ["quad"]
+    chain: Chain | None = None
     if COMPILED_FIRST_PASS and plain and quad_first and len(obs.cameras) == 1 and len(obs) >= 5:
         # auto's first pass in one compiled call (service.core.first_pass); a frame it does not
         # prove goes on below with the search's result in hand (QuadMatcher takes it up)
@@ -213,13 +226,25 @@ def solve_rig(
             sol = solution_of(*fp.columns, fp.rms_arcsec, fp.sigma_arcsec, fp.false_prob, "quad")
             return _stamped(sol, ["quad"], timings, t0, t2)
         obs.__dict__["_quad_prefetch"] = (plan[0][0], fp.search)
+        search = fp.search
+        if (COMPILED_FALLBACKS and SMALL_FRAME_FALLBACK_FIRST and len(sigmas) == 1 and len(obs) <= QUERY_STARS
+                and search[0] == STATUS_NONE and search[9]):
+            # the first pass looked up every pattern: the fallbacks in one compiled call too
+            chain = fallbacks(obs, plan, int(search[7]), FEW_STARS_MAX_TRIALS, sigmas[0], options.match_radius_px,
+                              options.max_false_prob, options.max_stars, deadline)
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
     # the coincidence bound is multiplied by
     misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?
     unprovable: list[str] = []  # methods skipped: no answer of theirs could pass the bound here
     trial_limit: int | None = None  # set after an exhaustive quad miss (FEW_STARS_MAX_TRIALS, MANY_STARS_MAX_TRIALS)
     small = QUAD_MIN_STARS <= len(obs) <= QUERY_STARS
-    for sigma in sigmas:
+    sigma = sigmas[0]
+    if chain is not None:
+        found, used, trials, unprovable = chain.found, chain.method, chain.trials, chain.unprovable
+        tried = ["quad", *chain.tried]
+        if chain.member is not None:
+            db = chain.member
+    for sigma in sigmas if chain is None else ():
         order = list(plan)
         for i, (member, methods) in enumerate(order):
             if misses and all(misses) and "quad" not in methods:
@@ -245,6 +270,11 @@ def solve_rig(
         sparse = isinstance(given, NavDatabaseSet) and 3 <= len(obs) <= SPARSE_ADVICE_STARS
         return no_solution(method, tried, trials, t2 > deadline, timings, unprovable, len(obs),
                            sparse_advice(obs.cameras) if sparse else "")
+    if COMPILED_SETTLE and len(obs.cameras) == 1 and options.epoch is None and options.observer_velocity_km_s is None:
+        st = settle(obs, db, deepest, found, sigma, options.match_radius_px, options.max_false_prob)
+        if st is not None:  # the first pass's own finish, compiled (None: the fit is re-examined below)
+            sol = solution_of(*st.columns, st.rms_arcsec, st.sigma_arcsec, st.false_prob, used)
+            return _stamped(sol, tried, timings, t0, t2)
     if deepest is not db:
         refined = _refine(obs, db, deepest, found, sigma, options)
         if refined is not None:
@@ -430,25 +460,6 @@ def solve_image(
     if sol.solved and sol.quaternion is not None:
         object.__setattr__(sol, "wcs", tan_wcs(quat_to_matrix(np.asarray(sol.quaternion)), camera))
     return sol
-
-
-def tan_wcs(r: np.ndarray, camera: Camera) -> dict[str, Any]:
-    """FITS WCS (gnomonic TAN) of an ICRS -> camera attitude: the reference pixel is the
-    principal point; CD maps FITS pixel offsets to (east, north) tangent-plane degrees.
-    Lens distortion, if any, is not represented (no SIP terms)."""
-    ra, dec, _ = radec_roll(r)
-    a, d = math.radians(ra), math.radians(dec)
-    east = np.array([-math.sin(a), math.cos(a), 0.0])
-    north = np.array([-math.sin(d) * math.cos(a), -math.sin(d) * math.sin(a), math.cos(d)])
-    k = math.degrees(1.0) / camera.f_px
-    return {
-        "CTYPE1": "RA---TAN", "CTYPE2": "DEC--TAN",
-        "CRVAL1": ra, "CRVAL2": dec,
-        "CRPIX1": camera.cx + 1.0, "CRPIX2": camera.cy + 1.0,
-        "CD1_1": k * float(r[0] @ east), "CD1_2": k * float(r[1] @ east),
-        "CD2_1": k * float(r[0] @ north), "CD2_2": k * float(r[1] @ north),
-        "NAXIS1": camera.width, "NAXIS2": camera.height,
-    }
 
 
 def _ensure_warm(db: NavDatabase | NavDatabaseSet) -> None:

@@ -105,6 +105,7 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
         for n in (len(frame), 4, 3):
             solve(Centroids(frame.xy[:n], frame.flux[:n]), camera, db)
         solve(Centroids(rng.uniform(0, 1023, (12, 2)), rng.uniform(1, 100, 12)), camera, db)
+        solve(Centroids(rng.uniform(0, 1023, (8, 2)), rng.uniform(1, 100, 8)), camera, db)  # the compiled fallbacks
     # rigs: the rig method's own kernels (its master votes, the cross-camera proof of a sparse
     # frame) on a frame of a member's stars dealt out to two cameras of one pointing
     for member in members:

@@ -20,7 +20,8 @@ import sys
 from ..conftest import ROOT
 
 KERNELS = {
-    "service.core.first_pass": ["first_pass_kernel"],
+    "service.core.first_pass": ["first_pass_kernel", "settle_kernel"],
+    "service.core.fallback_pass": ["chain_kernel", "_maxangle_pass"],
     "service.core.methods.quad_kernel": ["quad_search", "verify_pairs", "recheck_pairs", "_verify", "could_pair_more"],
     "service.core.match": ["_refine", "_match_rig", "_wahba_pairs"],
     "service.core.answer": ["answer_kernel"],
@@ -61,6 +62,6 @@ def test_the_default_path_compiles_each_kernel_once(default_set_db: object) -> N
     assert set(signatures) == {n for names in KERNELS.values() for n in names}
     for name, sigs in signatures.items():
         assert len(sigs) <= 1, (name, sigs)
-    for name in ("first_pass_kernel", "quad_search", "recheck_pairs", "answer_kernel", "_triangles_of",
+    for name in ("first_pass_kernel", "settle_kernel", "chain_kernel", "quad_search", "_triangles_of",
                  "search_chunks"):  # called from Python
         assert len(signatures[name]) == 1, (name, signatures[name])

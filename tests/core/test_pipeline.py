@@ -207,6 +207,7 @@ def test_few_star_frames_searched_in_full_get_a_budget_of_hypotheses(default_set
     monkeypatch.setattr(pipeline, "FEW_STARS_MAX_TRIALS", 1)  # one screen's worth, then no further check
     compiled = solve(frame, p.camera, default_set_db, options=opts)  # maxangle_search counts as the loop does
     monkeypatch.setattr(maxangle, "COMPILED_SEARCH", False)  # the Python loop, whose checks can be seen
+    monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", False)
     seen: list[int] = []
     real = pipeline.Verifier.check
 

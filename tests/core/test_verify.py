@@ -8,6 +8,7 @@ import hashlib
 import numpy as np
 import pytest
 
+from service.core import pipeline
 from service.core.attitude import quat_to_matrix
 from service.core.evaluate import score
 from service.core.match import match_rig
@@ -261,6 +262,7 @@ def test_a_candidate_that_cannot_pass_the_bound_is_counted_not_checked(default_s
                                                                    false_stars=2), rng=31)
               if len(f.centroids) == 6][:25]
     monkeypatch.setattr(maxangle, "COMPILED_SEARCH", False)
+    monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", False)  # the Python loop, whose checks can be seen
     checks = [0]
     real_check = Verifier.check
 
@@ -295,6 +297,7 @@ def test_the_wide_screen_starts_from_the_checks_attitude(default_set_db, monkeyp
     opts = SolveOptions(centroid_sigma_px=1.0)
     for compiled in (True, False):
         monkeypatch.setattr(maxangle, "COMPILED_SEARCH", compiled)
+        monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", compiled)
         sol = solve(f.centroids, p.camera, default_set_db, options=opts)
         assert sol.solved and score(sol, f.quaternion, f.hip.tolist(), blends=f.blends).correct
         assert len(sol.stars) == 5

@@ -1,0 +1,94 @@
+"""``auto``'s fallbacks on a small frame in one compiled call give the general loop's answer,
+frame for frame (:mod:`service.core.fallback_pass`)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from service.core import fallback_pass, pipeline
+from service.core.fallback_pass import KIND_MAXANGLE, KIND_QUAD, fallback_passes, fallbacks
+from service.core.pipeline import SolveOptions, _observation, solve
+from service.core.plan import search_plan
+from service.core.presets import PRESETS
+from service.core.sim import SimConfig, simulate_frames
+
+
+def _same(a, b) -> None:
+    assert (a.status, a.method, a.reason, a.methods_tried) == (b.status, b.method, b.reason, b.methods_tried)
+    assert [s[:2] for s in a.stars] == [s[:2] for s in b.stars]
+    if a.solved:
+        np.testing.assert_allclose(a.quaternion, b.quaternion, atol=1e-12)
+        assert a.false_match_probability == pytest.approx(b.false_match_probability, rel=1e-9)
+        assert a.rms_arcsec == pytest.approx(b.rms_arcsec, rel=1e-9)
+
+
+def _compare(monkeypatch, db, preset: str, noise: float, false: int, n: int, rng: int) -> tuple[int, int]:
+    """Solve ``n`` frames both ways; returns (frames the call took, frames it answered)."""
+    p = PRESETS[preset]
+    config = SimConfig(mag_limit=p.mag_limit, centroid_noise_px=noise, false_stars=false, mag_noise=0.3)
+    options = SolveOptions(centroid_sigma_px=noise)
+    calls = []
+
+    def counted(*args, **kwargs):
+        got = fallbacks(*args, **kwargs)
+        calls.append(got)
+        return got
+
+    monkeypatch.setattr(pipeline, "fallbacks", counted)
+    for frame in simulate_frames(p.camera, n, config, rng=rng):
+        monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", True)
+        fused = solve(frame.centroids, p.camera, db, options=options)
+        monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", False)
+        general = solve(frame.centroids, p.camera, db, options=options)
+        _same(fused, general)
+    taken = [c for c in calls if c is not None]
+    return len(taken), sum(c.found is not None for c in taken)
+
+
+# seed 002 (sparse then narrow, 4096 px) and seed 000 (mid then narrow): two members, the
+# passes alternate; seed 001: one member, one pass
+@pytest.mark.parametrize(("preset", "noise", "false", "least"),
+                         [("seed002", 0.5, 2, 60), ("seed002", 1.0, 5, 60), ("seed002", 2.0, 2, 40),
+                          ("seed000", 2.0, 5, 1), ("seed001", 1.0, 5, 1)])
+def test_the_compiled_fallbacks_answer_as_the_general_loop(monkeypatch, default_set_db, preset, noise, false,
+                                                          least) -> None:
+    taken, answered = _compare(monkeypatch, default_set_db, preset, noise, false, 200, 41)
+    assert taken >= least
+    if preset == "seed002":
+        assert answered >= 10  # maxangle's proofs of frames whose bright detections are false
+
+
+def test_a_spent_budget_is_counted_as_the_general_loop_counts_it(monkeypatch, default_set_db) -> None:
+    # a budget of 5 hypotheses: passes are cut short or not started, on both paths alike
+    monkeypatch.setattr(pipeline, "FEW_STARS_MAX_TRIALS", 5)
+    taken, _ = _compare(monkeypatch, default_set_db, "seed002", 1.0, 5, 120, 42)
+    assert taken >= 30
+
+
+def test_the_passes_follow_the_general_loops_order(default_set_db) -> None:
+    plan, _ = search_plan(default_set_db, [PRESETS["seed002"].camera], "auto", 0.5)
+    names = [(m.path.name, kind) for m, kind in fallback_passes(plan)]
+    assert names == [("sparse", KIND_MAXANGLE), ("narrow", KIND_QUAD), ("narrow", KIND_MAXANGLE)]
+    plan, _ = search_plan(default_set_db, [PRESETS["seed001"].camera], "auto", 0.5)
+    assert [(m.path.name, kind) for m, kind in fallback_passes(plan)] == [("narrow", KIND_MAXANGLE)]
+    plan, _ = search_plan(default_set_db, [PRESETS["seed002"].camera], "pyramid", 0.5)
+    assert fallback_passes(plan) is None  # not auto's shape: the general loop
+
+
+def test_a_quad_pass_short_of_its_patterns_hands_the_frame_back(monkeypatch, default_set_db) -> None:
+    """With no hash probe allowed, the second member's ``quad`` cannot look up every pattern:
+    the call returns None and the general loop (with its own bounds) answers the frame."""
+    p = PRESETS["seed002"]
+    frames = simulate_frames(p.camera, 300, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=0.5, false_stars=2),
+                             rng=43)
+    frame = next(f for f in frames if len(f.centroids) == 6)
+    obs = _observation([(frame.centroids, p.camera, None)], [np.eye(3)])
+    plan, _ = search_plan(default_set_db, [p.camera], "auto", 0.5)
+    args = (obs, plan, 0, 1000, 0.5, None, 1e-5, 8, time.perf_counter() + 1.0)
+    assert fallbacks(*args) is not None
+    monkeypatch.setattr(fallback_pass, "MAX_PROBES", -1)
+    assert fallbacks(*args) is None
+    assert fallbacks(*args[:-1], time.perf_counter()) is None  # no time left: the loop, which checks the clock

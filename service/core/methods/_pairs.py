@@ -134,6 +134,19 @@ def pattern_order(n: int) -> list[tuple[int, int, int]]:
     return out
 
 
+def empty_triangles(obs: Any, pairs: np.ndarray, tol: float) -> set[tuple[int, int, int]]:
+    """The triangles (observed rows, ascending) of this frame known to match no catalogue triple
+    of the pair table ``pairs`` (its rows, in place) with the same handedness at side tolerance
+    ``tol``: ``pyramid`` notes those it joined in vain, and ``triangle``, searching the same
+    member's table after it, skips them (kept with the frame's observation)."""
+    key = (pairs.__array_interface__["data"][0], len(pairs), float(tol))
+    known = obs.__dict__.setdefault("_empty_triangles", {})
+    got = known.get(key)
+    if got is None:
+        got = known[key] = set()
+    return got
+
+
 def join_triangles(e_ij: np.ndarray, e_ik: np.ndarray, keys_jk: np.ndarray, n_stars: int) -> np.ndarray:
     """Catalogue triples ``(a, b, c)`` with ``a-b`` in ``e_ij``, ``a-c`` in ``e_ik`` and ``b-c``
     among ``keys_jk`` (sorted ``b * n_stars + c`` keys, both orientations). Vectorised."""

@@ -24,6 +24,7 @@ from ..verify import Verified
 from ._pairs import (
     PairLimits,
     SharedPairs,
+    empty_triangles,
     join_windows,
     pair_limits,
     pattern_order,
@@ -92,6 +93,7 @@ class PyramidMatcher:
         # triangle of them a catalogue triangle (see EMPTY_TRIANGLES_TO_REFUSE)
         all_needed = len(obs) <= ctx.verifier.min_matches
         empty = 0
+        known_empty = empty_triangles(obs, self.pairs, tol)
         for i, j, k in pattern_order(n):
             if ctx.expired():
                 break
@@ -103,6 +105,7 @@ class PyramidMatcher:
             if len(cand):
                 cand = cand[same_handedness(self.vec, v[[i, j, k]], cand)]
             if len(cand) == 0:
+                known_empty.add((i, j, k))
                 empty += 1
                 if all_needed and empty >= EMPTY_TRIANGLES_TO_REFUSE:
                     break

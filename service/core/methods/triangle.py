@@ -47,6 +47,7 @@ from ..verify import Verified
 from ._pairs import (
     PairLimits,
     SharedPairs,
+    empty_triangles,
     join_windows,
     pair_limits,
     require_shared,
@@ -192,11 +193,12 @@ class TriangleMatcher:
         d = pairwise_angles(v)
         eps = ctx.tol_rad
         unique: list[tuple[np.ndarray, np.ndarray]] = []
+        known_empty = empty_triangles(obs, self.pairs, eps)  # pyramid's, on this member's table
         for i, j, k in self._triangle_order(d, n, eps):
             if ctx.expired():
                 break
             sides = (d[i, j], d[i, k], d[j, k])
-            if max(sides) > self.max_angle - eps or min(sides) < 4 * eps:
+            if max(sides) > self.max_angle - eps or min(sides) < 4 * eps or (i, j, k) in known_empty:
                 continue
             idx = np.array([i, j, k])
             cand = self.triples(v[idx], eps)

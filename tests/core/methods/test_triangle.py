@@ -168,3 +168,38 @@ def test_small_window_joins_run_side_by_side_on_threads(db: NavDatabase) -> None
     assert sum(sum(j[k + 1] - j[k] for k in (1, 3, 5)) <= LINKED_JOIN_MAX_ROWS for j in jobs) > 1100
     for w, g in zip(want, got, strict=True):
         np.testing.assert_array_equal(g, w)
+
+
+def test_triangles_pyramid_joined_in_vain_are_not_joined_again(default_set_db, monkeypatch) -> None:
+    """On seed 002's 4-star frames with 2 false stars, ``pyramid`` then ``triangle`` search the
+    same member's pair table: the triangles pyramid found matching no catalogue triple are
+    skipped by triangle (``_pairs.empty_triangles``), with the same answer."""
+    from service.core.methods.base import SolveContext
+    from service.core.pipeline import _observation
+    from service.core.presets import PRESETS
+    from service.core.verify import Verifier
+
+    p = PRESETS["seed002"]
+    member = default_set_db.members["sparse"]
+    frames = [f for f in simulate_frames(p.camera, 400, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=0.5,
+                                                                   false_stars=2), rng=12) if len(f.centroids) == 4]
+    assert len(frames) >= 10
+    tri = get_matcher(member, "triangle")
+    calls = []
+    real = TriangleMatcher.triples
+    monkeypatch.setattr(TriangleMatcher, "triples", lambda self, v, eps: calls.append(1) or real(self, v, eps))
+    skipped = 0
+    for frame in frames[:10]:
+        answers = []
+        for after_pyramid in (False, True):
+            obs = _observation([(frame.centroids, p.camera, None)], [np.eye(3)])
+            ver = Verifier(member, obs, match_radius_px=2.5)
+            tol = (3.0 * math.sqrt(2.0) * 0.5 + 0.5) * obs.pixel_scale_rad
+            if after_pyramid:
+                get_matcher(member, "pyramid").identify(SolveContext(obs, ver, tol, math.inf, 8))
+            calls.clear()
+            answers.append((tri.identify(SolveContext(obs, ver, tol, math.inf, 8)), len(calls)))
+        (alone, n_alone), (after, n_after) = answers
+        assert (alone is None) == (after is None)
+        skipped += n_alone - n_after
+    assert skipped >= 10

@@ -150,10 +150,12 @@ def _setup(plan: list[tuple[NavDatabase, list[str]]], cam: Any, radius_px: float
         second = next((m for m, _ in passes if m is not first), first)
         kinds = np.array([kind for _, kind in passes], np.int64)
         members = np.array([0 if m is first else 1 for m, _ in passes], np.int64)
-        own = first if "maxangle" in first.tables else second  # (a member without it has no such pass)
+        # a member without the method has no such pass: another's arrays fill its arguments
+        first_ma = first if "maxangle" in first.tables else second
+        second_ma = second if "maxangle" in second.tables else first_ma
         quad_of = second if "quad" in second.tables else first
-        static = (*_quad_args(quad_of, cam), *_maxangle_args(own, cam, radius_px),
-                  *_maxangle_args(second, cam, radius_px))
+        static = (*_quad_args(quad_of, cam), *_maxangle_args(first_ma, cam, radius_px),
+                  *_maxangle_args(second_ma, cam, radius_px))
         setup = (passes, kinds, members, static)
     if len(cache) >= SETUP_CACHE_SIZE:
         cache.clear()

@@ -44,6 +44,7 @@ from .methods.quad_kernel import (
     STATUS_FOUND,
     STATUS_MARGINAL,
     could_pair_more,
+    pack_search,
     quad_search,
     recheck_pairs,
 )
@@ -99,7 +100,9 @@ def deeper_arrays(shallow: NavDatabase, deep: NavDatabase) -> Deeper:
 class FirstPass(NamedTuple):
     """What :func:`first_pass` found.
 
-    ``search`` is the ``quad`` search's own result (see :func:`~.methods.quad_kernel.quad_search`);
+    ``search`` is the ``quad`` search's own result as two arrays (:func:`unpack_search` makes it
+    :func:`~.methods.quad_kernel.quad_search`'s tuple; ``search[0][:4]`` holds its status, trials,
+    patterns and whether it looked up every pattern);
     when ``solved`` the other fields hold the answer: observed and catalogue rows (of ``db``),
     the ICRS -> camera matrix, the false-match bound, and the fit's residuals (arcsec, per pair),
     RMS (arcsec) and 1-sigma about x, y, z (arcsec); ``columns`` everything the answer reports
@@ -129,14 +132,13 @@ def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigm
     k = obs.kernel_arrays
     static = _static_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob)
     flux = obs.flux if obs.flux is not None else _NO_FLUX
-    probes = camera_probes(obs.cameras[0], obs.mountings[0])
+    probes = obs.__dict__.setdefault("_image_probes", camera_probes(obs.cameras[0], obs.mountings[0]))  # one camera's
     solved, used_deep, ints, floats = first_pass_kernel(obs.vec, obs.xy, flux, obs.flux is not None, k.mounts,
                                                         k.cams, k.dist, k.rows, k.row_off, obs.index, probes,
                                                         *static)
     if not solved:
-        search = _unpack_search(ints, floats)
-        return FirstPass(search, False, member, _NO_ROWS, _NO_ROWS, search[5], 1.0, _NO_RES, 0.0, (0.0, 0.0, 0.0),
-                         int(search[7]))
+        return FirstPass((ints, floats), False, member, _NO_ROWS, _NO_ROWS, floats[:9].reshape(3, 3), 1.0, _NO_RES,
+                         0.0, (0.0, 0.0, 0.0), int(ints[1]))
     return _solved(ints, floats, deepest if used_deep else member)
 
 
@@ -146,53 +148,6 @@ def _solved(ints: np.ndarray, floats: np.ndarray, db: NavDatabase) -> FirstPass:
     prob, rms, sd0, sd1, sd2 = floats[9:14].tolist()
     return FirstPass(_SOLVED_SEARCH, True, db, ints[2:2 + n], ints[2 + n:2 + 2 * n], floats[:9].reshape(3, 3), prob,
                      floats[14:14 + n], rms, (sd0, sd1, sd2), trials, (ints[2 + 2 * n:], floats[14 + n:]))
-
-
-def _unpack_search(ints: np.ndarray, floats: np.ndarray) -> tuple[Any, ...]:
-    """:func:`~.methods.quad_kernel.quad_search`'s result from :func:`_pack_search`'s arrays."""
-    status, trials, n_pat, exhausted, probes, cands, n_m, k, n_l = ints[:9].tolist()
-    i = 9
-    hyp_obs, hyp_cat = ints[i:i + 4], ints[i + 4:i + 8]
-    i += 8
-    m_obs, m_cat = ints[i:i + n_m], ints[i + n_m:i + 2 * n_m]
-    i += 2 * n_m
-    marg_off = ints[i:i + k + 1]
-    i += k + 1
-    marg_obs, marg_cat = ints[i:i + n_l], ints[i + n_l:i + 2 * n_l]
-    marg_trials = ints[i + 2 * n_l:i + 2 * n_l + k]
-    return (status, hyp_obs, hyp_cat, m_obs, m_cat, floats[:9].reshape(3, 3), float(floats[9]), trials, n_pat,
-            bool(exhausted), floats[10:10 + 9 * k].reshape(k, 3, 3), floats[10 + 9 * k:10 + 10 * k], marg_off,
-            marg_obs, marg_cat, marg_trials, probes, cands)
-
-
-@njit(cache=True, nogil=True)
-def _pack_search(search):
-    """:func:`~.methods.quad_kernel.quad_search`'s result as one int64 and one float64 array
-    (a compiled call returns each array it hands to Python at ~0.3 us apiece; the search has 11)."""
-    status, hyp_obs, hyp_cat, m_obs, m_cat, r, prob, trials, n_pat, exhausted = search[:10]
-    marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials, probes, cands = search[10:]
-    n_m, k, n_l = len(m_obs), len(marg_prob), len(marg_obs)
-    ints = np.empty(9 + 8 + 2 * n_m + k + 1 + 2 * n_l + k, np.int64)
-    ints[0], ints[1], ints[2], ints[3], ints[4], ints[5] = status, trials, n_pat, exhausted, probes, cands
-    ints[6], ints[7], ints[8] = n_m, k, n_l
-    i = 9
-    ints[i:i + 4] = hyp_obs
-    ints[i + 4:i + 8] = hyp_cat
-    i += 8
-    ints[i:i + n_m] = m_obs
-    ints[i + n_m:i + 2 * n_m] = m_cat
-    i += 2 * n_m
-    ints[i:i + k + 1] = marg_off
-    i += k + 1
-    ints[i:i + n_l] = marg_obs
-    ints[i + n_l:i + 2 * n_l] = marg_cat
-    ints[i + 2 * n_l:] = marg_trials
-    floats = np.empty(10 + 10 * k)
-    floats[:9] = r.ravel()
-    floats[9] = prob
-    floats[10:10 + 9 * k] = marg_r.ravel()
-    floats[10 + 9 * k:] = marg_prob
-    return ints, floats
 
 
 STATIC_CACHE_SIZE = 64
@@ -296,7 +251,7 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
     when solved ``ints`` = trials, n, the n observed rows, the n catalogue rows, then
     :func:`~.solution.answer_columns`' ints, and ``floats`` = the matrix (9, row-major),
     false-match bound, RMS (arcsec), 1-sigma x, y, z (arcsec), the n residuals (arcsec), then
-    its floats; otherwise the search's result as :func:`_pack_search` packs it."""
+    its floats; otherwise the search's result as :func:`~.methods.quad_kernel.pack_search` packs it."""
     search = quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bin, edge_max, star_vec,
                          s_cell, s_side, s_keys, s_starts, s_stars, s_columns, g_cell, g_side, g_keys, g_starts,
                          g_stars, g_columns, near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale,
@@ -315,7 +270,7 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
     else:
         k = 0
     if k < 0:
-        ints, floats = _pack_search(search)
+        ints, floats = pack_search(search)
         return False, False, ints, floats
     ok, used_deep, ints, floats = settle_kernel(
         obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, obs_index, m_obs, m_cat, r, prob, trials,
@@ -324,7 +279,7 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
         answer_radius, sigma_px, sigma_rad, prior_dof, hip, d_hip, hidden, hidden_lim, d_hidden, d_hidden_lim,
         suspect_px)
     if not ok:
-        ints, floats = _pack_search(search)  # a fit the general path re-examines (trimmed_basin)
+        ints, floats = pack_search(search)  # a fit the general path re-examines (trimmed_basin)
         return False, False, ints, floats
     return True, used_deep, ints, floats
 

@@ -226,11 +226,11 @@ def solve_rig(
             sol = solution_of(*fp.columns, fp.rms_arcsec, fp.sigma_arcsec, fp.false_prob, "quad")
             return _stamped(sol, ["quad"], timings, t0, t2)
         obs.__dict__["_quad_prefetch"] = (plan[0][0], fp.search)
-        search = fp.search
+        status, _, _, exhausted = fp.search[0][:4].tolist()
         if (COMPILED_FALLBACKS and SMALL_FRAME_FALLBACK_FIRST and len(sigmas) == 1 and len(obs) <= QUERY_STARS
-                and search[0] == STATUS_NONE and search[9]):
+                and status == STATUS_NONE and exhausted):
             # the first pass looked up every pattern: the fallbacks in one compiled call too
-            chain = fallbacks(obs, plan, int(search[7]), FEW_STARS_MAX_TRIALS, sigmas[0], options.match_radius_px,
+            chain = fallbacks(obs, plan, fp.trials, FEW_STARS_MAX_TRIALS, sigmas[0], options.match_radius_px,
                               options.max_false_prob, options.max_stars, deadline)
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
     # the coincidence bound is multiplied by

@@ -28,7 +28,7 @@ from ..navdb.reader import NavDatabase
 from ..verify import NEAR_MARGIN_DEG, Verified, Verifier, field_grid, sky_grid, star_vec64
 from .base import Progress, SolveContext
 from .quad_build import LAYOUT, build_quad_table
-from .quad_kernel import STATUS_FOUND, quad_search
+from .quad_kernel import STATUS_FOUND, quad_search, unpack_search
 
 QUERY_STARS = 10
 """The brightest observed stars whose 4-star patterns are looked up (C(10, 4) = 210)."""
@@ -88,7 +88,7 @@ class QuadMatcher:
             return None
         pre = obs.__dict__.pop("_quad_prefetch", None)  # the first pass's own search (service.core.first_pass)
         if pre is not None and pre[0] is self.db and v.trials == 0:
-            res = pre[1]
+            res = unpack_search(*pre[1])
         else:
             res = self.search(obs, v, ctx.tol_rad)
         status, hyp_obs, hyp_cat, m_obs, m_cat, r, prob, trials, n_pat, exhausted = res[:10]

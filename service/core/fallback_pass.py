@@ -6,7 +6,7 @@ goes on through the rest of the plan: the first member's first fallback (``maxan
 next member's ``quad``, that member's ``maxangle`` (``SMALL_FRAME_FALLBACK_FIRST``), within
 ``FEW_STARS_MAX_TRIALS`` hypotheses. Through Python each pass cost a ``Verifier``, a method's
 wrapper, its compiled calls and the answer's choice among marginal ones: about 60 us of a
-~100-150 us frame of seed 002 (``/work/s17/kern.py``, session 17). Here the same passes run
+~100-150 us frame of seed 002 (docs/performance.md, session 17). Here the same passes run
 in one compiled call (:func:`chain_kernel`):
 
 - ``maxangle``: the frame's triangles (:func:`~.methods.maxangle._triangles_of`), every chunk

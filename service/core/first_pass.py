@@ -57,7 +57,7 @@ from .verify import (
     Observation,
     Verified,
     Verifier,
-    camera_probes,
+    _image_probes,
     field_grid,
     marginal_choice,
     star_vec64,
@@ -100,10 +100,10 @@ def deeper_arrays(shallow: NavDatabase, deep: NavDatabase) -> Deeper:
 class FirstPass(NamedTuple):
     """What :func:`first_pass` found.
 
-    ``search`` is the ``quad`` search's own result as two arrays (:func:`unpack_search` makes it
-    :func:`~.methods.quad_kernel.quad_search`'s tuple; ``search[0][:4]`` holds its status, trials,
-    patterns and whether it looked up every pattern);
-    when ``solved`` the other fields hold the answer: observed and catalogue rows (of ``db``),
+    ``search`` is the ``quad`` search's own result as two arrays
+    (:func:`~.methods.quad_kernel.unpack_search` makes it ``quad_search``'s tuple;
+    ``search[0][:4]`` holds its status, trials, patterns and whether it looked up every
+    pattern); when ``solved`` the other fields hold the answer: observed and catalogue rows (of ``db``),
     the ICRS -> camera matrix, the false-match bound, and the fit's residuals (arcsec, per pair),
     RMS (arcsec) and 1-sigma about x, y, z (arcsec); ``columns`` everything the answer reports
     (:func:`~.solution.solution_of` makes it a ``Solution``).
@@ -132,7 +132,7 @@ def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigm
     k = obs.kernel_arrays
     static = _static_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob)
     flux = obs.flux if obs.flux is not None else _NO_FLUX
-    probes = obs.__dict__.setdefault("_image_probes", camera_probes(obs.cameras[0], obs.mountings[0]))  # one camera's
+    probes = _image_probes(obs)
     solved, used_deep, ints, floats = first_pass_kernel(obs.vec, obs.xy, flux, obs.flux is not None, k.mounts,
                                                         k.cams, k.dist, k.rows, k.row_off, obs.index, probes,
                                                         *static)

@@ -504,6 +504,8 @@ def _image_probes(obs: Observation) -> FloatArray:
 
 
 def _probes_of(obs: Observation) -> FloatArray:
+    if len(obs.cameras) == 1:  # one camera: its own kept array (read only)
+        return camera_probes(obs.cameras[0], obs.mountings[0])
     return np.concatenate([camera_probes(cam, mount) for cam, mount in zip(obs.cameras, obs.mountings, strict=True)])
 
 

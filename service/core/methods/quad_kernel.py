@@ -23,9 +23,8 @@ attitude (:func:`could_pair_more`), so a check from another pattern could only r
 pairs again. (Seed 002's 6-star frames, where 4 + 2 stars are marginal at 4096 px, checked the
 same identification through each of their 15 patterns: 82 -> 36 us a search. Without the
 closed condition a later check sometimes pairs one more star, and 14 frames of 47,500 named one
-star fewer.) The work is
-bounded inside the loop (``max_probes`` hash probes, ``max_checks`` full verifications), not by
-a clock between Python batches.
+star fewer.) The work is bounded inside the loop (``max_probes`` hash probes, ``max_checks``
+full verifications), not by a clock between Python batches.
 """
 
 from __future__ import annotations
@@ -238,12 +237,8 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
                                         break
                                 if fits and _label(obs_vec, o, star_vec, c, tol, lab):
                                     trials += 1
-                                    repeat = False
-                                    for k in range(n_marg):
-                                        if marg_closed[k] and names_answer(o, lab, marg_off, marg_obs, marg_cat, k):
-                                            repeat = True
-                                            break
-                                    if repeat:
+                                    if n_marg > 0 and names_marginal(o, lab, marg_off, marg_obs, marg_cat, n_marg,
+                                                                     marg_closed):
                                         continue  # a closed answer reached again: see the docstring
                                     checks += 1
                                     res = _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord,
@@ -283,27 +278,25 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
 
 
 @njit(cache=True, nogil=True)
-def names_answer(o, c, marg_off, marg_obs, marg_cat, k):
-    """Does marginal answer ``k`` (pairs ``marg_obs``/``marg_cat`` in ``marg_off[k]:marg_off[k + 1]``)
-    pair every observed row ``o[i]`` with catalogue row ``c[i]``?"""
-    for i in range(len(o)):
-        hit = False
-        for j in range(marg_off[k], marg_off[k + 1]):
-            if marg_obs[j] == o[i]:
-                hit = marg_cat[j] == c[i]
-                break
-        if not hit:
-            return False
-    return True
-
-
-@njit(cache=True, nogil=True)
-def names_marginal(o, c, marg_off, marg_obs, marg_cat, n_marg):
-    """Does one of the ``n_marg`` marginal answers pair every observed row ``o[i]`` with catalogue
-    row ``c[i]`` (:meth:`~service.core.verify.Verifier.names_marginal`, ``maxangle``'s compiled
-    search)?"""
+def names_marginal(o, c, marg_off, marg_obs, marg_cat, n_marg, closed=None):
+    """Does one of the ``n_marg`` marginal answers (pairs ``marg_obs``/``marg_cat`` of answer ``k``
+    in ``marg_off[k]:marg_off[k + 1]``) pair every observed row ``o[i]`` with catalogue row
+    ``c[i]`` (:meth:`~service.core.verify.Verifier.names_marginal`)? With ``closed``, only the
+    answers it marks count (``quad``'s kernel: those no check could grow)."""
     for k in range(n_marg):
-        if names_answer(o, c, marg_off, marg_obs, marg_cat, k):
+        if closed is not None and not closed[k]:
+            continue
+        every = True
+        for i in range(len(o)):
+            hit = False
+            for j in range(marg_off[k], marg_off[k + 1]):
+                if marg_obs[j] == o[i]:
+                    hit = marg_cat[j] == c[i]
+                    break
+            if not hit:
+                every = False
+                break
+        if every:
             return True
     return False
 
@@ -483,7 +476,7 @@ def unpack_search(ints: np.ndarray, floats: np.ndarray) -> tuple[Any, ...]:
 
 @njit(cache=True, nogil=True)
 def pack_search(search):
-    """:func:`~.methods.quad_kernel.quad_search`'s result as one int64 and one float64 array
+    """:func:`quad_search`'s result as one int64 and one float64 array
     (a compiled call returns each array it hands to Python at ~0.3 us apiece; the search has 11)."""
     status, hyp_obs, hyp_cat, m_obs, m_cat, r, prob, trials, n_pat, exhausted = search[:10]
     marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials, probes, cands = search[10:]

@@ -185,13 +185,14 @@ def test_a_repeat_of_an_answer_that_no_check_could_grow_is_not_checked(default_s
         assert len(marg_obs) < len(frame.centroids) and all(frame.hip[obs.index[o]] >= 0 for o in marg_obs)
 
 
-def test_names_answer_asks_every_pair_of_the_hypothesis() -> None:
-    from service.core.methods.quad_kernel import names_answer, names_marginal
+def test_names_marginal_asks_every_pair_of_the_hypothesis_of_a_counted_answer() -> None:
+    from service.core.methods.quad_kernel import names_marginal
 
     off = np.array([0, 5, 11], np.int64)
     m_obs = np.array([0, 1, 2, 3, 4, 0, 1, 2, 3, 5, 4], np.int64)
     m_cat = np.array([10, 11, 12, 13, 14, 10, 11, 12, 13, 15, 16], np.int64)
     o, c = np.array([0, 1, 2, 4], np.int64), np.array([10, 11, 12, 14], np.int64)
-    assert names_answer(o, c, off, m_obs, m_cat, 0) and not names_answer(o, c, off, m_obs, m_cat, 1)
+    first, second = np.array([True, False]), np.array([False, True])  # which answers count (quad: the closed)
+    assert names_marginal(o, c, off, m_obs, m_cat, 2, first) and not names_marginal(o, c, off, m_obs, m_cat, 2, second)
     assert names_marginal(o, c, off, m_obs, m_cat, 2) and not names_marginal(o, c, off[1:] - 5, m_obs[5:], m_cat[5:], 1)
     assert not names_marginal(np.array([0, 1, 2, 5], np.int64), c, off, m_obs, m_cat, 2)

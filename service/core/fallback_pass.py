@@ -171,7 +171,8 @@ def _quad_args(member: NavDatabase, cam: Any) -> tuple[Any, ...]:
     if got is None:
         qm = get_matcher(member, "quad")
         near_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
-        got = cache[key] = (qm.patterns, qm.table, qm.ratio_bin, qm.edge_bin, qm.edge_max, qm.star_vec, *qm.screen,
+        got = cache[key] = (qm.patterns, qm.table, qm.spill, qm.ratio_bin, qm.edge_bin, qm.edge_max, qm.star_vec,
+                            *qm.screen,
                             *field_grid(member, near_deg).kernel_args(), 2 * math.sin(math.radians(near_deg) / 2))
     return got
 
@@ -240,7 +241,8 @@ def _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, l
 def chain_kernel(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, probes, kinds, members, trials, few_trials, n_tri,
                  tri, tol, radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns, screen_stars,
                  min_matches, area, agree_limit, max_candidates, checks_per_chunk, n_use, max_probes, max_checks,
-                 q_patterns, q_table, q_ratio_bin, q_edge_bin, q_edge_max, q_star_vec, q_s_cell, q_s_side, q_s_keys,
+                 q_patterns, q_table, q_spill, q_ratio_bin, q_edge_bin, q_edge_max, q_star_vec, q_s_cell, q_s_side,
+                 q_s_keys,
                  q_s_starts, q_s_stars, q_s_columns, q_g_cell, q_g_side, q_g_keys, q_g_starts, q_g_stars, q_g_columns,
                  q_near_chord,
                  a_cells, a_key, a_bucket_start, a_tab_x, a_tab_y, a_ids, a_n_buckets, a_b_scale, a_screen_chord,
@@ -291,7 +293,7 @@ def chain_kernel(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, probes, kin
                                radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns,
                                screen_stars, max_candidates, checks_per_chunk, *member)
         else:  # quad on the other member
-            search = quad_search(obs_vec, obs_xy, n_use, tol, q_patterns, q_table, q_ratio_bin, q_edge_bin,
+            search = quad_search(obs_vec, obs_xy, n_use, tol, q_patterns, q_table, q_spill, q_ratio_bin, q_edge_bin,
                                  q_edge_max, q_star_vec, q_s_cell, q_s_side, q_s_keys, q_s_starts, q_s_stars,
                                  q_s_columns, q_g_cell, q_g_side, q_g_keys, q_g_starts, q_g_stars, q_g_columns,
                                  q_near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale,

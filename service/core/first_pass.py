@@ -167,7 +167,7 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
     star_vec, near_chord, radius, scale = settle[:4]
     near = field_grid(member, cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG).kernel_args()
     tol = (3.0 * math.sqrt(2.0) * sigma_px + 0.5) * scale
-    static = (QUERY_STARS, tol, qm.patterns, qm.table, qm.ratio_bin, qm.edge_bin, qm.edge_max, star_vec,
+    static = (QUERY_STARS, tol, qm.patterns, qm.table, qm.spill, qm.ratio_bin, qm.edge_bin, qm.edge_max, star_vec,
               *qm.screen, *near, near_chord, radius, scale, float(max_false_prob),
               float(Verifier.strong_false_prob), int(Verifier.confirm_patterns), int(Verifier.screen_stars),
               MAX_PROBES, MAX_CHECKS, *settle[4:-1], 3.0 * radius * scale, settle[-1])
@@ -239,7 +239,7 @@ _NO_GRID = (1.0, 1, np.zeros(1, np.int64), np.zeros(2, np.int64), np.zeros(0, np
 
 @njit(cache=True, nogil=True)
 def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, obs_index, probes, n_use, tol,
-                      patterns, table,
+                      patterns, table, spill,
                       ratio_bin, edge_bin, edge_max, star_vec, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
                       g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, radius_px, pixel_scale,
                       max_false_prob, strong_false_prob, confirm_patterns, screen_stars, max_probes, max_checks,
@@ -252,7 +252,7 @@ def first_pass_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows,
     :func:`~.solution.answer_columns`' ints, and ``floats`` = the matrix (9, row-major),
     false-match bound, RMS (arcsec), 1-sigma x, y, z (arcsec), the n residuals (arcsec), then
     its floats; otherwise the search's result as :func:`~.methods.quad_kernel.pack_search` packs it."""
-    search = quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bin, edge_max, star_vec,
+    search = quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, edge_bin, edge_max, star_vec,
                          s_cell, s_side, s_keys, s_starts, s_stars, s_columns, g_cell, g_side, g_keys, g_starts,
                          g_stars, g_columns, near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale,
                          max_false_prob, strong_false_prob, confirm_patterns, screen_stars, np.int64(0), max_probes,

@@ -27,7 +27,7 @@ from ..errors import DatabaseCorruptError
 from ..navdb.reader import NavDatabase
 from ..verify import NEAR_MARGIN_DEG, Verified, Verifier, field_grid, sky_grid, star_vec64
 from .base import Progress, SolveContext
-from .quad_build import LAYOUT, build_quad_table
+from .quad_build import INLINE_LAYOUT, LAYOUT, build_quad_table
 from .quad_kernel import STATUS_FOUND, quad_search, unpack_search
 
 QUERY_STARS = 10
@@ -67,12 +67,13 @@ class QuadMatcher:
     def __init__(self, db: NavDatabase) -> None:
         t = db.tables["quad"]
         p = db.method_params("quad")
-        if p.get("layout") != LAYOUT:
+        if p.get("layout") not in (LAYOUT, INLINE_LAYOUT):
             raise DatabaseCorruptError(f"{db.path}: quad table of layout {p.get('layout')!r}, this skyfix reads "
                                        f"{LAYOUT!r}; rebuild it with `skyfix db build`")
         self.db = db
         self.patterns = np.asarray(t["patterns"])
         self.table = np.asarray(t["table"])
+        self.spill = np.asarray(t["spill"]) if "spill" in t else np.zeros(0, np.int64)  # INLINE_LAYOUT: none
         self.ratio_bin = float(p["ratio_bin"])
         self.edge_bin = float(p["edge_bin_rad"])
         self.edge_max = math.radians(float(p["fov_max_deg"]))
@@ -113,9 +114,10 @@ class QuadMatcher:
         k = obs.kernel_arrays
         near_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
         near_chord = 2 * math.sin(math.radians(near_deg) / 2)
-        return quad_search(obs.vec, obs.xy, QUERY_STARS, tol_rad, self.patterns, self.table,
+        return quad_search(obs.vec, obs.xy, QUERY_STARS, tol_rad, self.patterns, self.table, self.spill,
                            self.ratio_bin, self.edge_bin, self.edge_max, self.star_vec, *self.screen,
                            *field_grid(self.db, near_deg).kernel_args(), near_chord, k.mounts, k.cams, k.dist,
-                           k.rows, k.row_off, float(v.match_radius_px), float(obs.pixel_scale_rad), float(v.max_false_prob),
+                           k.rows, k.row_off, float(v.match_radius_px), float(obs.pixel_scale_rad),
+                           float(v.max_false_prob),
                            float(v.strong_false_prob), int(v.confirm_patterns), int(v.screen_stars),
                            int(v.trials), MAX_PROBES, MAX_CHECKS)

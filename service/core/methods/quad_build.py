@@ -13,8 +13,13 @@ divided by the largest (``ratio_bin`` wide bins) and the largest itself (``edge_
 bins). Keys are hashed into an open-addressing table (linear probing, load <= ``MAX_LOAD``) of
 int64 words: the pattern's row, bits of its key's hash and where each of its six values lies
 inside its bin (``FINE_STEPS`` steps), so a probe reads no pattern of another key, nor one
-whose values lie outside the query's tolerance. Patterns are stored once (deduplicated), their star
-rows sorted ascending.
+whose values lie outside the query's tolerance. A key of more than ``SPILL_OVER`` patterns
+(common shapes: up to 176 in the narrow member of the default set) keeps its entry words in a
+separate ``spill`` list, and the table one word pointing at them: a probe scans a cluster of
+the table until an empty slot, and such keys' runs made the narrow member's clusters long (a
+query probe read 32 words there, 10 of them its own key's; session 18). A spill list is sorted
+by the largest edge's fine step, so a probe reads only the part its tolerance reaches. Patterns
+are stored once (deduplicated), their star rows sorted ascending.
 """
 
 from __future__ import annotations
@@ -44,7 +49,12 @@ FINE_BITS = 4
 FINE_STEPS = 1 << FINE_BITS
 """Steps of a value's position inside its bin, kept in the table."""
 FINGER_BITS = 32 - 6 * FINE_BITS
-LAYOUT = f"ratio{N_RATIO_BINS}-fine{FINE_BITS}-finger{FINGER_BITS}"
+SPILL_OVER = 4
+"""A key with more patterns than this keeps them in the spill list, with one pointer word in
+the table, so that a probe of another key that lands beside it does not scan them."""
+INLINE_LAYOUT = f"ratio{N_RATIO_BINS}-fine{FINE_BITS}-finger{FINGER_BITS}"
+"""The layout until session 18: every pattern in the table (no spill list); still read."""
+LAYOUT = f"{INLINE_LAYOUT}-spill"
 """The table's word layout and key radix; a table of another layout cannot be read."""
 KEY_MULT = np.uint64(0x9E3779B97F4A7C15)
 
@@ -92,13 +102,12 @@ def build_quad_table(vec: np.ndarray, rank: np.ndarray, fov_min_deg: float, fov_
                                      grid.starts, grid.stars, vec, grid.columns))
     patterns = _unique_rows(np.concatenate(found), n)
     del found
-    cap = 1 << max(4, int(math.ceil(math.log2(max(len(patterns), 1) / MAX_LOAD))))
-    table = _build_table(vec, patterns, ratio_bin, edge_bin, cap)
+    table, spill = _build_table(vec, patterns, ratio_bin, edge_bin)
     store = patterns.astype(np.uint16 if n < 65536 else np.int32)
     used = {"layout": LAYOUT, "stars_per_field": per_field, "lattice_div": div, "ratio_bin": ratio_bin,
             "edge_bin_rad": edge_bin, "scales_deg": [round(float(s), 4) for s in scales],
             "fov_max_deg": float(fov_max_deg), "n_patterns": int(len(patterns))}
-    return {"patterns": store, "table": table}, used
+    return {"patterns": store, "table": table, "spill": spill}, used
 
 
 @njit(cache=True)
@@ -231,19 +240,72 @@ def slot_word(pattern: int, h: np.uint64, fine: np.ndarray) -> np.int64:
 
 
 @njit(cache=True)
-def _build_table(vec: np.ndarray, patterns: np.ndarray, ratio_bin: float, edge_bin: float,
-                 cap: int) -> np.ndarray:
-    table = np.zeros(cap, np.int64)
-    mask = np.uint64(cap - 1)
+def _pattern_words(vec: np.ndarray, patterns: np.ndarray, ratio_bin: float, edge_bin: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Each pattern's key hash and its entry word (:func:`slot_word`)."""
+    hashes = np.empty(len(patterns), np.uint64)
+    words = np.empty(len(patterns), np.int64)
     e = np.empty(6)
     q = np.empty(6, np.int64)
     fine = np.empty(6, np.int64)
     for p in range(len(patterns)):
         sorted_edges(vec, patterns[p], e)
         pattern_bins(e, ratio_bin, edge_bin, q, fine)
-        h = key_hash(combine_key(q))
-        s = h & mask
+        hashes[p] = key_hash(combine_key(q))
+        words[p] = slot_word(p, hashes[p], fine)
+    return hashes, words
+
+
+SPILL_SIGN = np.int64(np.iinfo(np.int64).min)
+"""The sign bit, which marks a pointer word (an entry word's pattern field is below 2**31)."""
+
+
+def spill_words(offsets: np.ndarray, counts: np.ndarray, hashes: np.ndarray) -> np.ndarray:
+    """Table slots that point at keys' entries ``spill[offset:offset + count]``: the sign bit,
+    ``offset`` (31 bits), ``FINGER_BITS`` of the key's hash (where an entry word has them) and
+    ``count`` (24 bits)."""
+    finger = (hashes >> np.uint64(64 - FINGER_BITS)).astype(np.int64)
+    return SPILL_SIGN | (offsets.astype(np.int64) << 32) | (finger << (6 * FINE_BITS)) | counts.astype(np.int64)
+
+
+@njit(cache=True)
+def _place(hashes: np.ndarray, words: np.ndarray, cap: int) -> np.ndarray:
+    """Open addressing (linear probing) of ``words`` at their hashes' low bits."""
+    table = np.zeros(cap, np.int64)
+    mask = np.uint64(cap - 1)
+    for k in range(len(words)):
+        s = hashes[k] & mask
         while table[s] != 0:
             s = (s + np.uint64(1)) & mask
-        table[s] = slot_word(p, h, fine)
+        table[s] = words[k]
     return table
+
+
+def _build_table(vec: np.ndarray, patterns: np.ndarray, ratio_bin: float, edge_bin: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The hash table and spill list of ``patterns`` (see :data:`SPILL_OVER`)."""
+    hashes, words = _pattern_words(vec, patterns, ratio_bin, edge_bin)
+    order = np.argsort(hashes, kind="stable")  # a key's patterns stay in row order
+    sorted_hashes = hashes[order]
+    first = np.flatnonzero(np.concatenate(([True], sorted_hashes[1:] != sorted_hashes[:-1])))
+    counts = np.diff(np.append(first, len(order)))
+    spilled = counts > SPILL_OVER
+    if counts.max(initial=0) >= 1 << 24 or counts[spilled].sum() >= 1 << 31:
+        raise ValueError("quad table: too many patterns share a key for the spill layout")
+    starts = np.zeros(len(first), np.int64)
+    starts[spilled] = np.cumsum(np.where(spilled, counts, 0))[spilled] - counts[spilled]
+    by_edge = np.lexsort((words & (FINE_STEPS - 1), hashes))  # a key's patterns by their largest edge's fine step
+    spill = words[by_edge[np.repeat(spilled, counts)]]
+    group = np.repeat(np.arange(len(first)), counts)  # each sorted pattern's key
+    lead = np.zeros(len(order), bool)
+    lead[first] = True
+    keep = ~np.repeat(spilled, counts) | lead  # inline patterns, and one pointer per spilled key
+    main = words[order].copy()
+    pointer = np.flatnonzero(lead & np.repeat(spilled, counts))
+    main[pointer] = spill_words(starts[group[pointer]], counts[group[pointer]], sorted_hashes[pointer])
+    keep_rows = order[keep]  # placed in row order: a key's inline patterns are met in row order
+    placed = np.argsort(keep_rows, kind="stable")
+    main_hashes = sorted_hashes[keep][placed]
+    main_words = main[keep][placed]
+    cap = 1 << max(4, int(math.ceil(math.log2(max(len(main_words), 1) / MAX_LOAD))))
+    return _place(main_hashes, main_words, cap), spill

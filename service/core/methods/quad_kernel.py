@@ -1,9 +1,10 @@
 """The ``quad`` search as one compiled call: body vectors in, the first verified attitude out.
 
 Patterns of the brightest observed stars (4-combinations in brightness order: every pattern of
-stars ``0..3``, then those adding star 4, ...) are keyed like the table's (see
-:mod:`.quad_build`), looked up in every key bin their tolerance reaches, and each candidate
-whose six angles all agree within ``tol`` is labelled (the vertex order of the 24 that fits
+stars ``0..3``, then those adding star 4, ...: :data:`COMBOS`) are keyed like the table's (see
+:mod:`.quad_build`), looked up in every key bin their tolerance reaches (a key's spill list
+from its first entry whose largest edge can match to its last: the list is sorted by that edge),
+and each candidate whose six angles all agree within ``tol`` is labelled (the vertex order of the 24 that fits
 best) and tried as a hypothesis exactly as :class:`~service.core.verify.Verifier` would:
 
 1. attitude by Wahba's problem (:func:`~service.core.attitude.wahba_kernel`);
@@ -59,6 +60,8 @@ NEAR_REUSE_COS = math.cos(math.radians(0.3))
 """A gathered field is reused while the boresight moves less than this (its margin is 0.5 deg)."""
 
 FINGER_MASK = (1 << FINGER_BITS) - 1
+SPILL_OFFSET_MASK = (1 << 31) - 1
+SPILL_COUNT_MASK = (1 << 24) - 1
 STATUS_NONE, STATUS_FOUND, STATUS_MARGINAL = 0, 1, 2
 
 
@@ -91,8 +94,103 @@ def _label(obs_vec: np.ndarray, o: np.ndarray, star_vec: np.ndarray, c: np.ndarr
     return found
 
 
+MAX_QUERY_STARS = 16
+"""Most observed stars whose patterns a search may form (``n_use`` is capped here)."""
+COMBOS = np.array([[a, b, c, d] for d in range(3, MAX_QUERY_STARS) for a in range(d) for b in range(a + 1, d)
+                   for c in range(b + 1, d)], dtype=np.int64)
+"""Every 4-combination of the brightest stars in search order: those of stars 0..3, then those
+adding star 4, ... (so those of the ``n`` brightest are the first ``COMBO_COUNT[n]``)."""
+COMBO_COUNT = np.array([math.comb(n, 4) for n in range(MAX_QUERY_STARS + 1)], dtype=np.int64)
+LOOK_AHEAD = 2
+"""Patterns whose first table words are requested before the current one is scanned (pattern
+``k + 2``'s at pattern ``k``), so that their misses overlap the scan: a pattern's own ~7 probes
+alone kept too few misses in flight."""
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _next_bin(cur: np.ndarray, lo: np.ndarray, hi: np.ndarray, row: int) -> None:
+    """Advance the bin combination ``cur`` (6,) over ``lo[row]..hi[row]`` (last coordinate slowest)."""
+    for i in range(6):
+        cur[i] += 1
+        if cur[i] <= hi[row, i]:
+            break
+        cur[i] = lo[row, i]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _first_edge_step(spill, first, end, step):
+    """The first entry of ``spill[first:end]`` (sorted by the largest edge's fine step, the
+    word's low bits) whose step is at least ``step``."""
+    while end - first > 8:  # bisect a long list, then step
+        mid = (first + end) // 2
+        if spill[mid] & (FINE_STEPS - 1) >= step:
+            end = mid
+        else:
+            first = mid + 1
+    while first < end and spill[first] & (FINE_STEPS - 1) < step:
+        first += 1
+    return first
+
+
 @njit(cache=True, nogil=True)
-def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bin, edge_max,
+def _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, row):
+    """Pattern ``COMBOS[k]``'s sorted edges (radians, from the observed stars' ``angles``), key
+    coordinates ``x`` +- ``t`` and bins ``lo..hi``, into ``row`` of ``r_*``; returns the probes
+    it needs, or -1 if its size is outside the table's."""
+    e = r_e[row]
+    n = 0
+    for i in range(4):
+        for j in range(i + 1, 4):
+            v = angles[COMBOS[k, i], COMBOS[k, j]]
+            m = n
+            while m > 0 and e[m - 1] > v:  # insertion: the six angles ascending, as sorted_edges
+                e[m] = e[m - 1]
+                m -= 1
+            e[m] = v
+            n += 1
+    big = e[5]
+    if big > edge_max + tol or big <= 4 * tol:
+        return -1
+    total = 1
+    for i in range(6):
+        if i < 5:
+            x = e[i] / big / ratio_bin
+            t = tol * (1.0 + e[i] / big) / big / ratio_bin
+        else:
+            x = big / edge_bin
+            t = tol / edge_bin
+        r_x[row, i], r_t[row, i] = x, t
+        r_lo[row, i] = max(int(x - t), 0)
+        r_hi[row, i] = int(x + t)
+        if i < 5:
+            r_hi[row, i] = min(r_hi[row, i], N_RATIO_BINS - 1)
+        total *= r_hi[row, i] - r_lo[row, i] + 1
+    return total
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _prefetch_slots(table, mask, r_lo, r_hi, total, row, cur):
+    """Request the first table word of each of the ``total`` probes of box ``row``."""
+    for i in range(6):
+        cur[i] = r_lo[row, i]
+    for _ in range(total):
+        prefetch(table, np.int64(key_hash(combine_key(cur)) & mask))
+        _next_bin(cur, r_lo, r_hi, row)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _look_ahead(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, r_total, table, mask,
+                cur):
+    """Box pattern ``k`` into its ring row and request its slots if it is a cheap one."""
+    row = k % (LOOK_AHEAD + 1)
+    total = _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, row)
+    r_total[row] = total
+    if 0 <= total <= PATTERN_PROBE_CAP:
+        _prefetch_slots(table, mask, r_lo, r_hi, total, row, cur)
+
+
+@njit(cache=True, nogil=True)
+def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, edge_bin, edge_max,
                 star_vec, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
                 g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord,
                 mounts, cams, dist, rows, row_off, radius_px, pixel_scale, max_false_prob, strong_false_prob,
@@ -148,129 +246,131 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, ratio_bin, edge_bi
     exhausted = True
     empty = np.zeros(0, np.int64)
     deferred = 0
+    n_comb = COMBO_COUNT[min(n_use, MAX_QUERY_STARS)]
+    r_e = np.empty((LOOK_AHEAD + 1, 6))  # the boxes of the pattern looked up and the next LOOK_AHEAD
+    r_x = np.empty((LOOK_AHEAD + 1, 6))
+    r_t = np.empty((LOOK_AHEAD + 1, 6))
+    r_lo = np.empty((LOOK_AHEAD + 1, 6), np.int64)
+    r_hi = np.empty((LOOK_AHEAD + 1, 6), np.int64)
+    r_total = np.empty(LOOK_AHEAD + 1, np.int64)
+    n_ang = min(n_use, MAX_QUERY_STARS)
+    angles = np.empty((n_ang, n_ang))  # between the brightest stars, each computed once
+    for i in range(n_ang):
+        for j in range(i + 1, n_ang):
+            angles[i, j] = angles[j, i] = row_angle(obs_vec, i, j)
     for phase in range(2):  # cheap patterns, then the deferred costly ones
         if phase == 1 and (deferred == 0 or not exhausted):
             break
-        for d in range(3, n_use):
-            for a in range(d):
-                for b in range(a + 1, d):
-                    for cc in range(b + 1, d):
-                        if first_marg >= 0 and n_pat - first_marg >= confirm_patterns:
-                            return (STATUS_MARGINAL, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, False,
-                                    marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1],
-                                    marg_obs[:marg_off[n_marg]], marg_cat[:marg_off[n_marg]], marg_trials[:n_marg], probes, cands)
-                        if probes > max_probes or checks > max_checks:
-                            exhausted = False
-                            break
-                        o[0], o[1], o[2], o[3] = a, b, cc, d
-                        sorted_edges(obs_vec, o, e)
-                        big = e[5]
-                        if big > edge_max + tol or big <= 4 * tol:
-                            if phase == 0:
-                                n_pat += 1  # counted once, never looked up
-                            continue
-                        total = 1
-                        for i in range(6):
-                            if i < 5:
-                                x[i] = e[i] / big / ratio_bin
-                                t[i] = tol * (1.0 + e[i] / big) / big / ratio_bin
-                            else:
-                                x[i] = big / edge_bin
-                                t[i] = tol / edge_bin
-                            lo[i] = max(int(x[i] - t[i]), 0)
-                            hi[i] = int(x[i] + t[i])
-                            if i < 5:
-                                hi[i] = min(hi[i], N_RATIO_BINS - 1)
-                            total *= hi[i] - lo[i] + 1
-                        if (total > PATTERN_PROBE_CAP) != (phase == 1):
-                            if phase == 0:
-                                deferred += 1
-                            continue  # costly patterns after every cheap one (PATTERN_PROBE_CAP)
-                        n_pat += 1
-                        probes += total
-                        # every probe's first table word requested at once: the table (32-64 MB)
-                        # misses the cache on nearly every probe, and the scan below would wait for
-                        # each miss in turn
-                        for i in range(6):
-                            cur[i] = lo[i]
-                        for _ in range(total):
-                            prefetch(table, np.int64(key_hash(combine_key(cur)) & mask))
-                            for i in range(6):
-                                cur[i] += 1
-                                if cur[i] <= hi[i]:
-                                    break
-                                cur[i] = lo[i]
-                        for i in range(6):
-                            cur[i] = lo[i]
-                        for i in range(6):  # where the query's range lies inside its first and last bin
-                            lo_fine[i] = max(int((x[i] - t[i] - lo[i]) * FINE_STEPS), 0)
-                            hi_fine[i] = min(int((x[i] + t[i] - hi[i]) * FINE_STEPS), FINE_STEPS - 1)
-                        for _ in range(total):
-                            for i in range(6):
-                                f_lo[i] = lo_fine[i] if cur[i] == lo[i] else 0
-                                f_hi[i] = hi_fine[i] if cur[i] == hi[i] else FINE_STEPS - 1
-                            h = key_hash(combine_key(cur))
-                            finger = np.int64(h >> np.uint64(64 - FINGER_BITS))
-                            sl = h & mask
-                            while table[sl] != 0:
-                                word = table[sl]
-                                sl = (sl + np.uint64(1)) & mask
-                                if (word >> (6 * FINE_BITS)) & FINGER_MASK != finger:
-                                    continue
-                                inside = True
-                                for i in range(6):
-                                    fi = (word >> (FINE_BITS * (5 - i))) & (FINE_STEPS - 1)
-                                    if fi < f_lo[i] or fi > f_hi[i]:
-                                        inside = False
-                                        break
-                                if not inside:
-                                    continue
-                                p = (word >> 32) - 1
-                                cands += 1
-                                for i in range(4):
-                                    c[i] = patterns[p, i]
-                                sorted_edges(star_vec, c, ec)
-                                fits = True
-                                for i in range(6):
-                                    if abs(ec[i] - e[i]) > tol:
-                                        fits = False
-                                        break
-                                if fits and _label(obs_vec, o, star_vec, c, tol, lab):
-                                    trials += 1
-                                    if n_marg > 0 and names_marginal(o, lab, marg_off, marg_obs, marg_cat, n_marg,
-                                                                     marg_closed):
-                                        continue  # a closed answer reached again: see the docstring
-                                    checks += 1
-                                    res = _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord,
-                                                  s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
-                                                  g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
-                                                  near_chord, mount, buf, near_state, mounts, cams, dist,
-                                                  rows, row_off, radius_px, quick_tol, trials, max_false_prob)
-                                    ok, m_obs, m_cat, r, prob = res
-                                    if ok and prob <= max_false_prob:
-                                        if prob <= strong_false_prob:
-                                            return (STATUS_FOUND, o.copy(), lab.copy(), m_obs, m_cat, r, prob,
-                                                    trials, n_pat, False, marg_r[:0], marg_prob[:0],
-                                                    marg_off[:1], empty, empty, marg_trials[:0], probes, cands)
-                                        if n_marg < MAX_MARGINAL:
-                                            n_marg = keep_marginal(marg_r, marg_prob, marg_trials, marg_off, marg_obs,
-                                                                   marg_cat, n_marg, r, prob, trials, m_obs, m_cat)
-                                            marg_closed[n_marg - 1] = len(m_obs) == n_obs or not could_pair_more(
-                                                obs_vec, m_obs, r, reach_chord, s_cell, s_side, s_keys, s_starts,
-                                                s_stars, star_vec, s_columns)
-                                        if first_marg < 0:
-                                            first_marg = n_pat
-                            for i in range(6):  # next bin combination
-                                cur[i] += 1
-                                if cur[i] <= hi[i]:
-                                    break
-                                cur[i] = lo[i]
-                    if not exhausted:
-                        break
-                if not exhausted:
-                    break
-            if not exhausted:
+        if phase == 0:  # the look-ahead: see _look_ahead
+            for k in range(min(LOOK_AHEAD, n_comb)):
+                _look_ahead(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, r_total,
+                            table, mask, cur)
+        for k in range(n_comb):
+            if first_marg >= 0 and n_pat - first_marg >= confirm_patterns:
+                return (STATUS_MARGINAL, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, False,
+                        marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1],
+                        marg_obs[:marg_off[n_marg]], marg_cat[:marg_off[n_marg]], marg_trials[:n_marg], probes, cands)
+            if probes > max_probes or checks > max_checks:
+                exhausted = False
                 break
+            for i in range(4):
+                o[i] = COMBOS[k, i]
+            row = k % (LOOK_AHEAD + 1)
+            if phase == 0:
+                if k + LOOK_AHEAD < n_comb:
+                    _look_ahead(angles, k + LOOK_AHEAD, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo,
+                                r_hi, r_total, table, mask, cur)
+                total = r_total[row]
+                if total < 0:
+                    n_pat += 1  # counted once, never looked up
+                    continue
+                if total > PATTERN_PROBE_CAP:
+                    deferred += 1
+                    continue  # costly patterns after every cheap one (PATTERN_PROBE_CAP)
+            else:
+                total = _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, row)
+                if total <= PATTERN_PROBE_CAP:
+                    continue  # a cheap pattern, looked up in phase 0 (or outside the table's sizes)
+                r_total[row] = total
+                _prefetch_slots(table, mask, r_lo, r_hi, total, row, cur)
+            n_pat += 1
+            probes += total
+            for i in range(6):
+                e[i], x[i], t[i], lo[i], hi[i] = r_e[row, i], r_x[row, i], r_t[row, i], r_lo[row, i], r_hi[row, i]
+            for i in range(6):
+                cur[i] = lo[i]
+            for i in range(6):  # where the query's range lies inside its first and last bin
+                lo_fine[i] = max(int((x[i] - t[i] - lo[i]) * FINE_STEPS), 0)
+                hi_fine[i] = min(int((x[i] + t[i] - hi[i]) * FINE_STEPS), FINE_STEPS - 1)
+            for _ in range(total):
+                for i in range(6):
+                    f_lo[i] = lo_fine[i] if cur[i] == lo[i] else 0
+                    f_hi[i] = hi_fine[i] if cur[i] == hi[i] else FINE_STEPS - 1
+                h = key_hash(combine_key(cur))
+                finger = np.int64(h >> np.uint64(64 - FINGER_BITS))
+                sl = h & mask
+                while table[sl] != 0:
+                    word = table[sl]
+                    sl = (sl + np.uint64(1)) & mask
+                    if (word >> (6 * FINE_BITS)) & FINGER_MASK != finger:
+                        continue
+                    first, end = 0, 1
+                    if word < 0:  # a key's entries in the spill list (quad_build.SPILL_OVER), by edge step
+                        first = (word >> 32) & SPILL_OFFSET_MASK
+                        end = first + (word & SPILL_COUNT_MASK)
+                        first = _first_edge_step(spill, first, end, f_lo[5])
+                    for j in range(first, end):
+                        entry = spill[j] if word < 0 else word
+                        if word < 0 and entry & (FINE_STEPS - 1) > f_hi[5]:
+                            break  # the rest lie past the query's largest edge
+                        inside = True
+                        for i in range(6):
+                            fi = (entry >> (FINE_BITS * (5 - i))) & (FINE_STEPS - 1)
+                            if fi < f_lo[i] or fi > f_hi[i]:
+                                inside = False
+                                break
+                        if not inside:
+                            continue
+                        p = (entry >> 32) - 1
+                        cands += 1
+                        for i in range(4):
+                            c[i] = patterns[p, i]
+                        sorted_edges(star_vec, c, ec)
+                        fits = True
+                        for i in range(6):
+                            if abs(ec[i] - e[i]) > tol:
+                                fits = False
+                                break
+                        if fits and _label(obs_vec, o, star_vec, c, tol, lab):
+                            trials += 1
+                            if n_marg > 0 and names_marginal(o, lab, marg_off, marg_obs, marg_cat, n_marg,
+                                                             marg_closed):
+                                continue  # a closed answer reached again: see the docstring
+                            checks += 1
+                            res = _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord,
+                                          s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
+                                          g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
+                                          near_chord, mount, buf, near_state, mounts, cams, dist,
+                                          rows, row_off, radius_px, quick_tol, trials, max_false_prob)
+                            ok, m_obs, m_cat, r, prob = res
+                            if ok and prob <= max_false_prob:
+                                if prob <= strong_false_prob:
+                                    return (STATUS_FOUND, o.copy(), lab.copy(), m_obs, m_cat, r, prob,
+                                            trials, n_pat, False, marg_r[:0], marg_prob[:0],
+                                            marg_off[:1], empty, empty, marg_trials[:0], probes, cands)
+                                if n_marg < MAX_MARGINAL:
+                                    n_marg = keep_marginal(marg_r, marg_prob, marg_trials, marg_off, marg_obs,
+                                                           marg_cat, n_marg, r, prob, trials, m_obs, m_cat)
+                                    marg_closed[n_marg - 1] = len(m_obs) == n_obs or not could_pair_more(
+                                        obs_vec, m_obs, r, reach_chord, s_cell, s_side, s_keys, s_starts,
+                                        s_stars, star_vec, s_columns)
+                                if first_marg < 0:
+                                    first_marg = n_pat
+                for i in range(6):  # next bin combination
+                    cur[i] += 1
+                    if cur[i] <= hi[i]:
+                        break
+                    cur[i] = lo[i]
     status = STATUS_MARGINAL if n_marg else STATUS_NONE
     return (status, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, exhausted and n_marg == 0,
             marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1], marg_obs[:marg_off[n_marg]],

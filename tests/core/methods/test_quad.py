@@ -9,13 +9,15 @@ import pytest
 from scipy.special import betainc
 
 from service.core.methods import get_matcher
-from service.core.methods.quad_build import build_quad_table, field_scales
+from service.core.methods import quad_build
+from service.core.methods.quad_build import FINE_STEPS, FINGER_BITS, SPILL_OVER, build_quad_table, field_scales
+from service.core.methods.quad import QuadMatcher
 from service.core.methods.quad_kernel import STATUS_FOUND, binomial_tail
 from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
 from service.core.pipeline import SolveOptions, _observation, solve
 from service.core.sim import SimConfig, random_points, simulate_frames
 from service.core.types import SolveStatus
-from service.core.verify import Verifier
+from service.core.verify import Verifier, star_vec64
 from tests.conftest import SEED000_CAMERA
 
 CAM = SEED000_CAMERA
@@ -97,10 +99,43 @@ def test_table_finds_every_pattern_of_a_field() -> None:
     pats = tables["patterns"].astype(np.int64)
     assert len(np.unique(pats, axis=0)) == len(pats) == used["n_patterns"] > 1000
     assert np.all(np.diff(pats, axis=1) > 0)
-    table = tables["table"]
-    assert np.count_nonzero(table) == len(pats) and len(table) & (len(table) - 1) == 0
-    assert sorted((table[table != 0] >> 32) - 1) == list(range(len(pats)))
+    table, spill = tables["table"], tables["spill"]
+    assert len(table) & (len(table) - 1) == 0
+    inline = table[table > 0]
+    pointers = table[table < 0]
+    offsets, counts = (pointers >> 32) & ((1 << 31) - 1), pointers & ((1 << 24) - 1)
+    # every pattern once: in the table, or in the spill list behind one pointer word of its key
+    assert counts.min() > SPILL_OVER and counts.sum() == len(spill) and len(pointers) > 0
+    assert sorted(np.concatenate([(inline >> 32) - 1, (spill >> 32) - 1]).tolist()) == list(range(len(pats)))
+    finger = (1 << FINGER_BITS) - 1
+    for off, n, word in zip(offsets, counts, pointers, strict=True):
+        entries = spill[off:off + n]
+        assert np.all((entries >> 24) & finger == (word >> 24) & finger)  # the key's finger
+        assert np.all(np.diff(entries & (FINE_STEPS - 1)) >= 0)  # by the largest edge's fine step
     assert field_scales(5.0, 5.0).tolist() == [5.0] and field_scales(3.5, 16.5)[-1] == pytest.approx(16.5)
+
+
+def test_a_table_without_spill_list_gives_the_same_answers(quad_db: NavDatabase,
+                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """The layout before session 18 (every pattern in the table: ``INLINE_LAYOUT``) is still
+    read, and a search finds there what it finds with the spill list."""
+    qm = get_matcher(quad_db, "quad")
+    monkeypatch.setattr(quad_build, "SPILL_OVER", 1 << 23)
+    p = quad_db.method_params("quad")
+    table, spill = quad_build._build_table(star_vec64(quad_db), qm.patterns.astype(np.int64), p["ratio_bin"],
+                                           p["edge_bin_rad"])
+    assert len(spill) == 0 and np.count_nonzero(table) == len(qm.patterns) and np.all(table >= 0)
+    config = SimConfig(mag_limit=6.5, centroid_noise_px=1.0, false_stars=2)
+    frames = [f.centroids for f in simulate_frames(CAM, 6, config, rng=21)]
+    frames += [random_points(CAM, 25, np.random.default_rng(3))]
+    inline = QuadMatcher.__new__(QuadMatcher)
+    inline.__dict__.update(qm.__dict__, table=table, spill=np.zeros(0, np.int64))
+    for centroids in frames:
+        obs = _observation([(centroids, CAM, None)], [np.eye(3)])
+        tol = (3.0 * math.sqrt(2.0) + 0.5) * obs.pixel_scale_rad
+        got = [m.search(obs, Verifier(quad_db, obs, match_radius_px=3.0), tol) for m in (qm, inline)]
+        assert got[0][0] == got[1][0] and got[0][9] == got[1][9]  # status, exhausted
+        assert np.array_equal(got[0][3], got[1][3]) and np.array_equal(got[0][4], got[1][4])  # the pairs
 
 
 def test_auto_answers_with_quad_on_the_default_database(default_set_db) -> None:

@@ -53,6 +53,7 @@ from bench.common import (
     summarize,
     write_json,
 )
+import numpy as np  # after bench.common (see there)
 from bench.peers import StarRows, tetra3rs_peer
 from bench.peers import cedar as cedar_mod
 from service.core.catalog import load_hipparcos, select_stars
@@ -181,6 +182,7 @@ def run(args: argparse.Namespace) -> int:
                     row = {"camera": cam, "sweep": sweep, "value": scen.value, "scenario": scen.label,
                            "solvers": {n: summarize(js) for n, js in judged.items()}}
                     row["ratio"] = time_ratio(row["solvers"])
+                    row["split"] = split_by_peer(judged)
                     results["sweeps"].append(row)
                     print(f"[{cam} {sweep} {scen.value:g}] " + "  ".join(
                         f"{n}: {fmt(s['rate'], 1, True)} {s['wrong']}w {fmt(s['ms_median'])}ms"
@@ -222,6 +224,40 @@ def time_ratio(solvers: dict[str, dict[str, Any]]) -> dict[str, Any]:
     fastest = min(peers, key=peers.get)
     return {"fastest_peer": fastest, **{n: s["ms_median"] / peers[fastest] for n, s in solvers.items()
                                         if n.startswith("skyfix") and s["ms_median"]}}
+
+
+def split_by_peer(judged: dict[str, list]) -> dict[str, dict[str, Any]]:
+    """skyfix's first entry against each peer on the same frames, split by outcome: frames both
+    solve right (``both``: each one's mean and median ms) and frames only skyfix solves right
+    (``only_skyfix``: skyfix's mean ms there, the peer's too). Where skyfix solves frames a peer
+    refuses, its mean over all frames pays for them; this shows what the common frames cost."""
+    names = list(judged)
+    sk = next((n for n in names if n.startswith("skyfix")), None)
+    if sk is None:
+        return {}
+    mine = judged[sk]
+    right = [j.solved and not j.wrong for j in mine]
+    out: dict[str, dict[str, Any]] = {}
+    for peer in (n for n in names if not n.startswith("skyfix")):
+        theirs = judged[peer]
+        both = [i for i, (a, b) in enumerate(zip(right, theirs, strict=True)) if a and b.solved and not b.wrong]
+        only = [i for i, (a, b) in enumerate(zip(right, theirs, strict=True))
+                if a and not (b.solved and not b.wrong)]
+        out[peer] = {
+            "both": len(both),
+            "both_skyfix_ms_mean": float(np.mean([mine[i].ms for i in both])) if both else None,
+            "both_peer_ms_mean": float(np.mean([theirs[i].ms for i in both])) if both else None,
+            "both_skyfix_ms_median": _median([mine[i].ms for i in both]),
+            "both_peer_ms_median": _median([theirs[i].ms for i in both]),
+            "only_skyfix": len(only),
+            "only_skyfix_ms_mean": float(np.mean([mine[i].ms for i in only])) if only else None,
+            "only_skyfix_peer_ms_mean": float(np.mean([theirs[i].ms for i in only])) if only else None,
+        }
+    return out
+
+
+def _median(xs: list[float]) -> float | None:
+    return float(np.median(xs)) if xs else None
 
 
 def run_real(args: argparse.Namespace, peers: Peers, pdir: Path) -> dict[str, Any]:
@@ -313,7 +349,7 @@ def render(res: dict[str, Any], args: argparse.Namespace, info: dict[str, Any], 
                         f"{n} {fmt(rs[-1]['solvers'][n]['cross_arcsec_median'], 1)}" for n in names) + "."]
             if una:
                 out += ["", "Not measured here: " + "; ".join(f"{k}: {v}" for k, v in una.items()) + "."]
-            out += [""]
+            out += [""] + split_table(rs, sk[:1])
     out += goals(res)
     if res.get("real"):
         re_ = res["real"]
@@ -330,6 +366,25 @@ def render(res: dict[str, Any], args: argparse.Namespace, info: dict[str, Any], 
         if re_["unavailable"]:
             out += ["Not measured: " + "; ".join(f"{k}: {v}" for k, v in re_["unavailable"].items()), ""]
     return "\n".join(out)
+
+
+def split_table(rs: list[dict[str, Any]], sk: list[str]) -> list[str]:
+    """The same frames, split by outcome (:func:`split_by_peer`), for each peer of the sweep."""
+    peers = list((rs[0].get("split") or {}) if sk else {})
+    if not peers:
+        return []
+    head = ["value"] + [f"{sk[0]} · {p}: both right n / mean ms / median ms; only skyfix n / mean ms" for p in peers]
+    body = []
+    for r in rs:
+        cells = [f"{r['value']:g}"]
+        for p in peers:
+            x = r["split"][p]
+            cells.append(f"{x['both']} / {fmt(x['both_skyfix_ms_mean'])} vs {fmt(x['both_peer_ms_mean'])} / "
+                         f"{fmt(x['both_skyfix_ms_median'])} vs {fmt(x['both_peer_ms_median'])}; "
+                         f"{x['only_skyfix']} / {fmt(x['only_skyfix_ms_mean'])}")
+        body.append(cells)
+    return ["The same frames by outcome (skyfix vs the peer on frames both solve right; skyfix's time on the "
+            "frames only it solves right):", "", md_table(head, body), ""]
 
 
 def goals(res: dict[str, Any]) -> list[str]:

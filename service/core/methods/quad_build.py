@@ -171,6 +171,8 @@ def _field_patterns(centres: np.ndarray, chord: float, per_field: int, rank: np.
 def _unique_rows(rows: np.ndarray, n: int) -> np.ndarray:
     """Distinct rows of ``rows`` ``(M, 4)`` of values below ``n``, as int64."""
     bits = max(int(n - 1).bit_length(), 1)
+    if len(rows) == 0:
+        return np.zeros((0, 4), np.int64)
     if 4 * bits <= 63:  # one int64 a pattern: a fast 1-D unique
         packed = np.zeros(len(rows), np.int64)
         for i in range(4):
@@ -284,6 +286,8 @@ def _place(hashes: np.ndarray, words: np.ndarray, cap: int) -> np.ndarray:
 def _build_table(vec: np.ndarray, patterns: np.ndarray, ratio_bin: float, edge_bin: float
                  ) -> tuple[np.ndarray, np.ndarray]:
     """The hash table and spill list of ``patterns`` (see :data:`SPILL_OVER`)."""
+    if len(patterns) == 0:  # too few stars for a pattern: an empty table
+        return np.zeros(16, np.int64), np.zeros(0, np.int64)
     hashes, words = _pattern_words(vec, patterns, ratio_bin, edge_bin)
     order = np.argsort(hashes, kind="stable")  # a key's patterns stay in row order
     sorted_hashes = hashes[order]

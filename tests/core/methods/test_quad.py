@@ -115,6 +115,13 @@ def test_table_finds_every_pattern_of_a_field() -> None:
     assert field_scales(5.0, 5.0).tolist() == [5.0] and field_scales(3.5, 16.5)[-1] == pytest.approx(16.5)
 
 
+def test_a_catalogue_too_sparse_for_a_pattern_gives_an_empty_table() -> None:
+    vec = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])  # 3 stars 90 deg apart
+    tables, used = build_quad_table(vec, np.arange(3), 5.0, 10.0, {})
+    assert used["n_patterns"] == 0 and len(tables["patterns"]) == 0 and len(tables["spill"]) == 0
+    assert not tables["table"].any()
+
+
 def test_a_table_without_spill_list_gives_the_same_answers(quad_db: NavDatabase,
                                                            monkeypatch: pytest.MonkeyPatch) -> None:
     """The layout before session 18 (every pattern in the table: ``INLINE_LAYOUT``) is still

@@ -101,6 +101,7 @@ def check_unique_triangle(
     thin = 1.0
     if len(box) > SPARSE_MAX_SAMPLE:  # a random thinning of a Poisson count is Poisson
         thin = len(box) / SPARSE_MAX_SAMPLE
+        box = box[np.lexsort(box.T[::-1])]  # by (a, b, c): the sample does not depend on the join's order
         box = box[np.random.default_rng(0).choice(len(box), SPARSE_MAX_SAMPLE, replace=False)]
     if not worth(box_halfwidth_rad, thin):
         return None  # the box's projections could only raise the bound

@@ -311,28 +311,32 @@ def join_windows_counting(pairs: np.ndarray, s_ij: int, e_ij: int, s_ik: int, e_
     ab_start, ab_adj = _adjacency(pairs, s_ij, e_ij, n_stars)  # a-b, by a: the stable order by first star
     out = np.empty((64, 3), np.int64)
     n = 0
-    a_of = 0
-    for k in range(len(ab_adj)):
-        while ab_start[a_of + 1] <= k:
-            a_of += 1
-        a, b = a_of, ab_adj[k]
-        for q in range(ac_start[a], ac_start[a + 1]):
-            c = ac_adj[q]
-            if c == b:
+    for a in range(n_stars):
+        q0, q1 = ac_start[a], ac_start[a + 1]
+        if q0 == q1:
+            continue
+        for k in range(ab_start[a], ab_start[a + 1]):
+            b = ab_adj[k]
+            t0, t1 = bc_start[b], bc_start[b + 1]
+            if t0 == t1:  # b has no b-c edge (most often): no c to look for
                 continue
-            joined = False
-            for t in range(bc_start[b], bc_start[b + 1]):
-                if bc_adj[t] == c:
-                    joined = True
-                    break
-            if not joined:
-                continue
-            if n == len(out):  # grow by doubling: one sweep, not a count and a fill
-                grown = np.empty((2 * n, 3), np.int64)
-                grown[:n] = out
-                out = grown
-            out[n, 0], out[n, 1], out[n, 2] = a, b, c
-            n += 1
+            for q in range(q0, q1):
+                c = ac_adj[q]
+                if c == b:
+                    continue
+                joined = False
+                for t in range(t0, t1):
+                    if bc_adj[t] == c:
+                        joined = True
+                        break
+                if not joined:
+                    continue
+                if n == len(out):  # grow by doubling: one sweep, not a count and a fill
+                    grown = np.empty((2 * n, 3), np.int64)
+                    grown[:n] = out
+                    out = grown
+                out[n, 0], out[n, 1], out[n, 2] = a, b, c
+                n += 1
     return out[:n].copy()
 
 

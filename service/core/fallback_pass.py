@@ -1,13 +1,16 @@
-"""``auto``'s fallbacks on a small frame as one compiled call, after the first pass's miss.
+"""``auto``'s fallbacks as one compiled call, after the first pass's miss.
 
-When :mod:`service.core.first_pass` looked up every pattern of a one-camera frame of 5 to
-``QUERY_STARS`` stars on the plan's first member and proved nothing, :func:`service.core.pipeline.solve_rig`
-goes on through the rest of the plan: the first member's first fallback (``maxangle``), the
-next member's ``quad``, that member's ``maxangle`` (``SMALL_FRAME_FALLBACK_FIRST``), within
-``FEW_STARS_MAX_TRIALS`` hypotheses. Through Python each pass cost a ``Verifier``, a method's
-wrapper, its compiled calls and the answer's choice among marginal ones: about 60 us of a
-~100-150 us frame of seed 002 (docs/performance.md, session 17). Here the same passes run
-in one compiled call (:func:`chain_kernel`):
+When :mod:`service.core.first_pass` looked up every pattern of a one-camera frame on the plan's
+first member and proved nothing, :func:`service.core.pipeline.solve_rig` goes on through the
+rest of the plan. On a frame of 5 to ``QUERY_STARS`` stars: the first member's first fallback
+(``maxangle``), the next member's ``quad``, that member's ``maxangle``
+(``SMALL_FRAME_FALLBACK_FIRST``), within ``FEW_STARS_MAX_TRIALS`` hypotheses; on a larger
+frame (since session 18) in the plan's order: the next member's ``quad``, then each member's
+``maxangle``, within ``MANY_STARS_MAX_TRIALS``. Through Python each pass cost a ``Verifier``, a
+method's wrapper, its compiled calls and the answer's choice among marginal ones: about 60 us
+of a ~100-150 us frame of seed 002 (docs/performance.md, session 17), ~50 us of a random-point
+frame of 11-39 points on seed 000's camera (session 18). Here the same passes run in one
+compiled call (:func:`chain_kernel`):
 
 - ``maxangle``: the frame's triangles (:func:`~.methods.maxangle._triangles_of`), every chunk
   through :func:`~.methods.maxangle_search.search_chunks` (one call where Python made one per
@@ -53,8 +56,9 @@ bound (the pipeline's ``unprovable``); it was not started, the budget being spen
 CHAIN_FOUND, CHAIN_NONE, CHAIN_BACK = 1, 0, -1
 MIN_CLOCK_S = 0.05
 """Time the frame must have left for the call: it does not look at the clock (its work is
-bounded by the hypothesis budget: ~10 ms at most here), so a frame nearer its deadline takes
-the general loop, which checks the clock between passes."""
+bounded by the hypothesis budget: ~10 ms at most on a small frame, ~25 ms on a larger one, whose
+``MANY_STARS_MAX_TRIALS`` bounds it so), so a frame nearer its deadline takes the general loop,
+which checks the clock between passes."""
 
 
 class Chain(NamedTuple):
@@ -69,20 +73,25 @@ class Chain(NamedTuple):
     unprovable: list[str]
 
 
-def fallback_passes(plan: list[tuple[NavDatabase, list[str]]]) -> list[tuple[NavDatabase, int]] | None:
-    """The passes the general loop runs after the first member's exhaustive ``quad`` miss on a
-    small frame, if every ``quad`` pass after it misses exhaustively too: ``(member, kind)``;
-    None for a plan this call does not take (more than two members, a first fallback other
-    than ``maxangle``)."""
+def fallback_passes(plan: list[tuple[NavDatabase, list[str]]], small: bool = True
+                    ) -> list[tuple[NavDatabase, int]] | None:
+    """The passes the general loop runs after the first member's exhaustive ``quad`` miss, if
+    every ``quad`` pass after it misses exhaustively too: ``(member, kind)``; on a ``small``
+    frame (5 to ``QUERY_STARS`` stars) each member's first fallback right after its ``quad``
+    (``pipeline.SMALL_FRAME_FALLBACK_FIRST``), on a larger one in the plan's order (every
+    ``quad``, then the fallbacks). None for a plan this call does not take (more than two
+    members, a first fallback other than ``maxangle``)."""
     order = list(plan)
     first = order[0][0]
-    fallback_next(order, 0)
+    if small:
+        fallback_next(order, 0)
     passes: list[tuple[NavDatabase, int]] = []
     for i in range(1, len(order)):
         member, methods = order[i]
         if methods == ["quad"] and member is not first:
             passes.append((member, KIND_QUAD))
-            fallback_next(order, i)
+            if small:
+                fallback_next(order, i)
         elif methods and methods[0] == "maxangle" and "quad" not in methods:
             passes.append((member, KIND_MAXANGLE))
         else:
@@ -96,17 +105,18 @@ def fallback_passes(plan: list[tuple[NavDatabase, list[str]]]) -> list[tuple[Nav
 
 def fallbacks(obs: Observation, plan: list[tuple[NavDatabase, list[str]]], trials: int, few_trials: int,
               sigma_px: float, match_radius_px: float | None, max_false_prob: float, max_stars: int,
-              deadline: float) -> Chain | None:
-    """The fallback passes of ``plan`` (:func:`fallback_passes`) on ``obs`` after ``trials``
-    hypotheses of the first pass, the budget ``few_trials`` hypotheses from the first fallback
-    (``pipeline.FEW_STARS_MAX_TRIALS``), in one compiled call. None where the general loop must
-    run them (see the module's docstring)."""
+              deadline: float, small: bool = True) -> Chain | None:
+    """The fallback passes of ``plan`` (:func:`fallback_passes`, on a ``small`` frame or a
+    larger one) on ``obs`` after ``trials`` hypotheses of the first pass, the budget
+    ``few_trials`` hypotheses from the first fallback (``pipeline.FEW_STARS_MAX_TRIALS``, or
+    ``MANY_STARS_MAX_TRIALS``), in one compiled call. None where the general loop must run them
+    (see the module's docstring)."""
     if deadline - time.perf_counter() < MIN_CLOCK_S:
         return None
     cam = obs.cameras[0]
     scale = obs.pixel_scale_rad
     radius = match_radius_px or max(2.5, 3.0 * sigma_px)
-    setup = _setup(plan, cam, float(radius))
+    setup = _setup(plan, cam, float(radius), small)
     if setup is None:
         return None
     passes, kinds, members, static = setup
@@ -133,18 +143,18 @@ def fallbacks(obs: Observation, plan: list[tuple[NavDatabase, list[str]]], trial
 SETUP_CACHE_SIZE = 64
 
 
-def _setup(plan: list[tuple[NavDatabase, list[str]]], cam: Any, radius_px: float
+def _setup(plan: list[tuple[NavDatabase, list[str]]], cam: Any, radius_px: float, small: bool
            ) -> tuple[list[tuple[NavDatabase, int]], np.ndarray, np.ndarray, tuple[Any, ...]] | None:
     """The passes of ``plan`` (:func:`fallback_passes`) as the kernel takes them: kinds and
-    members, and every member's arrays; kept per plan, camera and match radius (px) on the
-    first member (every frame of a camera asks the same; building them costs ~5 us)."""
+    members, and every member's arrays; kept per plan, frame size class, camera and match radius
+    (px) on the first member (every frame of a camera asks the same; building them costs ~5 us)."""
     first = plan[0][0]
     cache = first.__dict__.setdefault("_chain_setup", {})
-    key = (id(plan), cam.diagonal_fov_deg, cam.pixel_scale_rad, radius_px)
+    key = (id(plan), small, cam.diagonal_fov_deg, cam.pixel_scale_rad, radius_px)
     got = cache.get(key)
     if got is not None and got[0] is plan:
         return got[1]
-    passes = fallback_passes(plan)
+    passes = fallback_passes(plan, small)
     setup = None
     if passes is not None:
         second = next((m for m, _ in passes if m is not first), first)

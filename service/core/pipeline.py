@@ -227,11 +227,13 @@ def solve_rig(
             return _stamped(sol, ["quad"], timings, t0, t2)
         obs.__dict__["_quad_prefetch"] = (plan[0][0], fp.search)
         status, _, _, exhausted = fp.search[0][:4].tolist()
-        if (COMPILED_FALLBACKS and SMALL_FRAME_FALLBACK_FIRST and len(sigmas) == 1 and len(obs) <= QUERY_STARS
+        few = len(obs) <= QUERY_STARS  # (5 or more here)
+        if (COMPILED_FALLBACKS and (SMALL_FRAME_FALLBACK_FIRST or not few) and len(sigmas) == 1
                 and status == STATUS_NONE and exhausted):
             # the first pass looked up every pattern: the fallbacks in one compiled call too
-            chain = fallbacks(obs, plan, fp.trials, FEW_STARS_MAX_TRIALS, sigmas[0], options.match_radius_px,
-                              options.max_false_prob, options.max_stars, deadline)
+            chain = fallbacks(obs, plan, fp.trials, FEW_STARS_MAX_TRIALS if few else MANY_STARS_MAX_TRIALS,
+                              sigmas[0], options.match_radius_px, options.max_false_prob, options.max_stars,
+                              deadline, few)
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
     # the coincidence bound is multiplied by
     misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?

@@ -62,6 +62,7 @@ def test_the_default_path_compiles_each_kernel_once(default_set_db: object) -> N
     assert set(signatures) == {n for names in KERNELS.values() for n in names}
     for name, sigs in signatures.items():
         assert len(sigs) <= 1, (name, sigs)
-    for name in ("first_pass_kernel", "settle_kernel", "chain_kernel", "quad_search", "_triangles_of",
-                 "search_chunks"):  # called from Python
+    # called from Python (quad_search no longer is on these frames: since session 18 the
+    # fallbacks of a frame of more than QUERY_STARS stars run compiled too, as a small frame's did)
+    for name in ("first_pass_kernel", "settle_kernel", "chain_kernel", "_triangles_of", "search_chunks"):
         assert len(signatures[name]) == 1, (name, signatures[name])

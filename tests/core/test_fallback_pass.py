@@ -1,5 +1,5 @@
-"""``auto``'s fallbacks on a small frame in one compiled call give the general loop's answer,
-frame for frame (:mod:`service.core.fallback_pass`)."""
+"""``auto``'s fallbacks in one compiled call give the general loop's answer, frame for frame
+(:mod:`service.core.fallback_pass`)."""
 
 from __future__ import annotations
 
@@ -22,11 +22,8 @@ def _same(a, b) -> None:
     assert a.methods_tried == b.methods_tried
 
 
-def _compare(monkeypatch, db, preset: str, noise: float, false: int, n: int, rng: int) -> tuple[int, int]:
-    """Solve ``n`` frames both ways; returns (frames the call took, frames it answered)."""
-    p = PRESETS[preset]
-    config = SimConfig(mag_limit=p.mag_limit, centroid_noise_px=noise, false_stars=false, mag_noise=0.3)
-    options = SolveOptions(centroid_sigma_px=noise)
+def _counting(monkeypatch) -> list:
+    """The pipeline's calls of :func:`fallbacks` from now on, with what each returned."""
     calls = []
 
     def counted(*args, **kwargs):
@@ -35,6 +32,15 @@ def _compare(monkeypatch, db, preset: str, noise: float, false: int, n: int, rng
         return got
 
     monkeypatch.setattr(pipeline, "fallbacks", counted)
+    return calls
+
+
+def _compare(monkeypatch, db, preset: str, noise: float, false: int, n: int, rng: int) -> tuple[int, int]:
+    """Solve ``n`` frames both ways; returns (frames the call took, frames it answered)."""
+    p = PRESETS[preset]
+    config = SimConfig(mag_limit=p.mag_limit, centroid_noise_px=noise, false_stars=false, mag_noise=0.3)
+    options = SolveOptions(centroid_sigma_px=noise)
+    calls = _counting(monkeypatch)
     for frame in simulate_frames(p.camera, n, config, rng=rng):
         monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", True)
         fused = solve(frame.centroids, p.camera, db, options=options)
@@ -56,6 +62,36 @@ def test_the_compiled_fallbacks_answer_as_the_general_loop(monkeypatch, default_
     assert taken >= least
     if preset == "seed002":
         assert answered >= 10  # maxangle's proofs of frames whose bright detections are false
+
+
+@pytest.mark.parametrize("budget", [None, 5])
+def test_frames_of_more_stars_than_quad_looks_at_take_the_plans_order(monkeypatch, default_set_db, budget) -> None:
+    """A frame of more than ``QUERY_STARS`` stars: every member's ``quad``, then the fallbacks,
+    within ``MANY_STARS_MAX_TRIALS`` (random points: every pass runs to its end; with a budget of
+    5 hypotheses, cut short), as the general loop runs them."""
+    from service.core.sim import random_points
+
+    if budget is not None:
+        monkeypatch.setattr(pipeline, "MANY_STARS_MAX_TRIALS", budget)
+
+    p = PRESETS["seed000"]
+    options = SolveOptions(centroid_sigma_px=1.0)
+    calls = _counting(monkeypatch)
+    rng = np.random.default_rng(44)
+    for n in (12, 20, 30, 39):
+        points = random_points(p.camera, n, rng)
+        monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", True)
+        fused = solve(points, p.camera, default_set_db, options=options)
+        monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", False)
+        general = solve(points, p.camera, default_set_db, options=options)
+        _same(fused, general)
+        assert not fused.solved and fused.methods_tried == ("quad", "maxangle")
+    assert len(calls) == 4 and all(c is not None for c in calls)
+    if budget is None:
+        assert all(c.tried == ["quad", "maxangle", "maxangle"] for c in calls)
+    plan, _ = search_plan(default_set_db, [p.camera], "auto", 1.0)
+    names = [(m.path.name, kind) for m, kind in fallback_passes(plan, small=False)]
+    assert names == [("narrow", KIND_QUAD), ("mid", KIND_MAXANGLE), ("narrow", KIND_MAXANGLE)]
 
 
 def test_a_spent_budget_is_counted_as_the_general_loop_counts_it(monkeypatch, default_set_db) -> None:

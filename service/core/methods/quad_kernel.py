@@ -4,8 +4,9 @@ Patterns of the brightest observed stars (4-combinations in brightness order: ev
 stars ``0..3``, then those adding star 4, ...: :data:`COMBOS`) are keyed like the table's (see
 :mod:`.quad_build`), looked up in every key bin their tolerance reaches (a key's spill list
 from its first entry whose largest edge can match to its last: the list is sorted by that edge),
-and each candidate whose six angles all agree within ``tol`` is labelled (the vertex order of the 24 that fits
-best) and tried as a hypothesis exactly as :class:`~service.core.verify.Verifier` would:
+and each candidate whose six angles all agree within ``tol`` is labelled (the vertex order of
+the 24 that fits best) and tried as a hypothesis exactly as :class:`~service.core.verify.Verifier`
+would:
 
 1. attitude by Wahba's problem (:func:`~service.core.attitude.wahba_kernel`);
 2. screen: the brightest other stars must hit a catalogue star within 1.5 match radii
@@ -196,6 +197,10 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
                 mounts, cams, dist, rows, row_off, radius_px, pixel_scale, max_false_prob, strong_false_prob,
                 confirm_patterns, screen_stars, trials0, max_probes, max_checks):
     """Search ``obs_vec`` ``(N, 3)`` (brightest first; one camera) for a verified attitude.
+
+    ``patterns``, ``table`` and ``spill`` are the database's pattern table (:mod:`.quad_build`;
+    ``spill`` is empty for a table of the layout before it, every entry in ``table``); ``tol``
+    is the angle tolerance (radians).
 
     Returns ``(status, hyp_obs, hyp_cat, m_obs, m_cat, r, prob, trials, n_patterns, exhausted,
     marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials)``: ``status`` 1 with the

@@ -141,8 +141,9 @@ COMPILED_FIRST_PASS = True
 the same steps through the general path (four compiled calls; the tests compare the two)."""
 
 COMPILED_FALLBACKS = True
-"""Run the fallbacks of a small frame after the first pass's exhaustive miss as one compiled call
-(:mod:`service.core.fallback_pass`); False takes the general loop (the tests compare the two)."""
+"""Run the fallbacks after the first pass's exhaustive miss on one camera as one compiled call
+(:mod:`service.core.fallback_pass`; a small frame's and, since session 18, a larger one's);
+False takes the general loop (the tests compare the two)."""
 
 COMPILED_SETTLE = True
 """Finish an answer that another method proved (one camera, no epoch or aberration) as the first

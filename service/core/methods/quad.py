@@ -69,7 +69,7 @@ class QuadMatcher:
         p = db.method_params("quad")
         if p.get("layout") not in (LAYOUT, INLINE_LAYOUT):
             raise DatabaseCorruptError(f"{db.path}: quad table of layout {p.get('layout')!r}, this skyfix reads "
-                                       f"{LAYOUT!r}; rebuild it with `skyfix db build`")
+                                       f"{LAYOUT!r} or {INLINE_LAYOUT!r}; rebuild it with `skyfix db build`")
         self.db = db
         self.patterns = np.asarray(t["patterns"])
         self.table = np.asarray(t["table"])

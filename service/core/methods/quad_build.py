@@ -260,6 +260,10 @@ def _pattern_words(vec: np.ndarray, patterns: np.ndarray, ratio_bin: float, edge
 
 SPILL_SIGN = np.int64(np.iinfo(np.int64).min)
 """The sign bit, which marks a pointer word (an entry word's pattern field is below 2**31)."""
+SPILL_OFFSET_MASK = (1 << 31) - 1
+"""A pointer word's offset into the spill list, above bit 32 (:func:`spill_words`)."""
+SPILL_COUNT_MASK = (1 << 24) - 1
+"""A pointer word's count of entries, its low bits."""
 
 
 def spill_words(offsets: np.ndarray, counts: np.ndarray, hashes: np.ndarray) -> np.ndarray:
@@ -294,18 +298,19 @@ def _build_table(vec: np.ndarray, patterns: np.ndarray, ratio_bin: float, edge_b
     first = np.flatnonzero(np.concatenate(([True], sorted_hashes[1:] != sorted_hashes[:-1])))
     counts = np.diff(np.append(first, len(order)))
     spilled = counts > SPILL_OVER
-    if counts.max(initial=0) >= 1 << 24 or counts[spilled].sum() >= 1 << 31:
+    if counts.max(initial=0) > SPILL_COUNT_MASK or counts[spilled].sum() > SPILL_OFFSET_MASK:
         raise ValueError("quad table: too many patterns share a key for the spill layout")
     starts = np.zeros(len(first), np.int64)
     starts[spilled] = np.cumsum(np.where(spilled, counts, 0))[spilled] - counts[spilled]
     by_edge = np.lexsort((words & (FINE_STEPS - 1), hashes))  # a key's patterns by their largest edge's fine step
-    spill = words[by_edge[np.repeat(spilled, counts)]]
+    in_spill = np.repeat(spilled, counts)  # each sorted pattern: is its key's list in the spill?
+    spill = words[by_edge[in_spill]]
     group = np.repeat(np.arange(len(first)), counts)  # each sorted pattern's key
     lead = np.zeros(len(order), bool)
     lead[first] = True
-    keep = ~np.repeat(spilled, counts) | lead  # inline patterns, and one pointer per spilled key
-    main = words[order].copy()
-    pointer = np.flatnonzero(lead & np.repeat(spilled, counts))
+    keep = ~in_spill | lead  # inline patterns, and one pointer per spilled key
+    main = words[order]
+    pointer = np.flatnonzero(lead & in_spill)
     main[pointer] = spill_words(starts[group[pointer]], counts[group[pointer]], sorted_hashes[pointer])
     keep_rows = order[keep]  # placed in row order: a key's inline patterns are met in row order
     placed = np.argsort(keep_rows, kind="stable")

@@ -43,7 +43,8 @@ from ..skygrid import collect_within, has_star_within
 from ..attitude import wahba_kernel
 from ..prefetch import prefetch
 from ..verify import NEED_SCREEN_FACTOR, SETTLE_FACTORS
-from .quad_build import FINE_BITS, FINE_STEPS, FINGER_BITS, N_RATIO_BINS, combine_key, key_hash, row_angle, sorted_edges
+from .quad_build import (FINE_BITS, FINE_STEPS, FINGER_BITS, N_RATIO_BINS, SPILL_COUNT_MASK, SPILL_OFFSET_MASK,
+                         combine_key, key_hash, row_angle, sorted_edges)
 
 PERMS = np.array([[a, b, c, d] for a in range(4) for b in range(4) for c in range(4) for d in range(4)
                   if len({a, b, c, d}) == 4], dtype=np.int64)
@@ -61,8 +62,6 @@ NEAR_REUSE_COS = math.cos(math.radians(0.3))
 """A gathered field is reused while the boresight moves less than this (its margin is 0.5 deg)."""
 
 FINGER_MASK = (1 << FINGER_BITS) - 1
-SPILL_OFFSET_MASK = (1 << 31) - 1
-SPILL_COUNT_MASK = (1 << 24) - 1
 STATUS_NONE, STATUS_FOUND, STATUS_MARGINAL = 0, 1, 2
 
 

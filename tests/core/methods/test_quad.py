@@ -10,7 +10,8 @@ from scipy.special import betainc
 
 from service.core.methods import get_matcher
 from service.core.methods import quad_build
-from service.core.methods.quad_build import FINE_STEPS, FINGER_BITS, SPILL_OVER, build_quad_table, field_scales
+from service.core.methods.quad_build import (FINE_STEPS, FINGER_BITS, SPILL_COUNT_MASK, SPILL_OFFSET_MASK, SPILL_OVER,
+                                             build_quad_table, field_scales)
 from service.core.methods.quad import QuadMatcher
 from service.core.methods.quad_kernel import STATUS_FOUND, binomial_tail
 from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
@@ -103,7 +104,7 @@ def test_table_finds_every_pattern_of_a_field() -> None:
     assert len(table) & (len(table) - 1) == 0
     inline = table[table > 0]
     pointers = table[table < 0]
-    offsets, counts = (pointers >> 32) & ((1 << 31) - 1), pointers & ((1 << 24) - 1)
+    offsets, counts = (pointers >> 32) & SPILL_OFFSET_MASK, pointers & SPILL_COUNT_MASK
     # every pattern once: in the table, or in the spill list behind one pointer word of its key
     assert counts.min() > SPILL_OVER and counts.sum() == len(spill) and len(pointers) > 0
     assert sorted(np.concatenate([(inline >> 32) - 1, (spill >> 32) - 1]).tolist()) == list(range(len(pats)))

@@ -69,15 +69,49 @@ its packed copy below is made once; the kernels only read it)."""
 _IDENTITY_MOUNT = IDENTITY_MOUNTING.reshape(1, 3, 3).copy()
 
 
+FRAME_ROWS_KEPT = 4096
+"""Frame sizes whose :func:`frame_rows` are kept (a frame of more stars makes its own)."""
+_FRAME_ROWS: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def frame_rows(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(zeros(n), arange(n), [0, n])`` int64 for a one-camera frame of ``n`` stars: its
+    camera column, its rows and their offsets, kept per ``n`` (every frame of that size asks
+    the same; nothing writes to them, and they stay writable: a read-only array would be
+    another type for the compiled kernels)."""
+    got = _FRAME_ROWS.get(n)
+    if got is None:
+        got = (np.zeros(n, np.int64), np.arange(n, dtype=np.int64), np.array([0, n], np.int64))
+        if n <= FRAME_ROWS_KEPT:
+            _FRAME_ROWS[n] = got
+    return got
+
+
+_ONE_CAMERA_ARRAYS: dict[tuple[Any, int], RigArrays] = {}
+
+
 def rig_arrays(cameras: Sequence[Any], mountings: Sequence[np.ndarray], by_camera: Sequence[np.ndarray]) -> RigArrays:
     """Pack cameras (:class:`~service.core.camera.Camera`), their mountings and their observed
     rows for the kernels."""
-    cams, dist = _camera_rows(tuple(cameras))
+    cameras = tuple(cameras)
     if len(by_camera) == 1:  # one camera, every frame: skip the general packing (~20 us)
         rows = np.asarray(by_camera[0], np.int64)
         m = mountings[0]
+        n = len(rows)
+        if m is IDENTITY_MOUNTING and rows is _FRAME_ROWS.get(n, (None, None))[1]:
+            # solve()'s frame (identity mounting, rows 0..n-1): the same arrays every time (~1.3 us)
+            key = (cameras, n)
+            got = _ONE_CAMERA_ARRAYS.get(key)
+            if got is None:
+                cams, dist = _camera_rows(cameras)
+                if len(_ONE_CAMERA_ARRAYS) >= 4096:
+                    _ONE_CAMERA_ARRAYS.clear()
+                got = _ONE_CAMERA_ARRAYS[key] = RigArrays(_IDENTITY_MOUNT, cams, dist, rows, frame_rows(n)[2])
+            return got
+        cams, dist = _camera_rows(cameras)
         mount = _IDENTITY_MOUNT if m is IDENTITY_MOUNTING else np.array(m, dtype=np.float64).reshape(1, 3, 3)
-        return RigArrays(mount, cams, dist, rows, np.array([0, len(rows)], np.int64))
+        return RigArrays(mount, cams, dist, rows, np.array([0, n], np.int64))
+    cams, dist = _camera_rows(cameras)
     off = np.zeros(len(by_camera) + 1, np.int64)
     off[1:] = np.cumsum([len(r) for r in by_camera])
     rows = np.concatenate([np.asarray(r, np.int64) for r in by_camera]) if by_camera else np.zeros(0, np.int64)

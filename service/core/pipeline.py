@@ -22,7 +22,7 @@ from .errors import InvalidInputError
 from .finish import solution
 from .fallback_pass import Chain, fallbacks
 from .first_pass import deeper_arrays, first_pass, settle
-from .match import IDENTITY_MOUNTING
+from .match import IDENTITY_MOUNTING, frame_rows
 from .methods import SolveContext, get_matcher
 from .methods.quad import MIN_STARS as QUAD_MIN_STARS
 from .methods.quad import QUERY_STARS
@@ -390,9 +390,8 @@ def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: 
                                                    float(cam.cx), float(cam.cy), float(cam.f_px))
         if mountings[0] is not _IDENTITY and not np.array_equal(mountings[0], _IDENTITY):
             vec = vec @ mountings[0]
-        n = len(order)
-        return Observation(vec, xy, order, np.zeros(n, np.int64), (cam,), tuple(mountings), by_camera=(np.arange(n),),
-                           flux=flux)
+        camera, rows, _ = frame_rows(len(order))
+        return Observation(vec, xy, order, camera, (cam,), tuple(mountings), by_camera=(rows,), flux=flux)
     vecs, xys, idx, cams, fluxes = [], [], [], [], []
     for c, (cents, cam, _) in enumerate(frames):
         if len(cents) == 0:

@@ -13,6 +13,9 @@ skyfix's database holds for that camera: Hipparcos to the preset's magnitude lim
 frame in rotating order, in one single-threaded process each, so a load spike on this shared
 machine hits all of them alike; the time of a solve is measured inside the process that runs
 it, with its database already loaded; every solver has the same 500 ms budget per frame.
+``--order blocked`` runs each solver over all of a point's frames in turn instead, as a batch
+job runs one solver: a solve then follows the same solver's previous frame, not another
+solver's, whose tables have pushed its own out of the processor's caches.
 
 - skyfix: ``solve`` with ``SolveOptions(centroid_sigma_px=max(noise, 0.1))``.
 - tetra3rs (Rust, PyPI): exact ``CameraModel``; pattern tolerance 0.001 (its default) and 0.002
@@ -126,17 +129,34 @@ def quiet_heap() -> None:
     gc.freeze()
 
 
-def run_frames(solvers: list[Any], frames: list[tuple[Any, Any, Any, Any, Any]], noise: float) -> dict[str, list]:
-    """``frames``: (centroids, camera, q_true, hip_true, blends). Rotating solver order."""
+ORDERS = ("rotating", "blocked")
+
+
+def run_frames(solvers: list[Any], frames: list[tuple[Any, Any, Any, Any, Any]], noise: float,
+               order: str = "rotating") -> dict[str, list]:
+    """``frames``: (centroids, camera, q_true, hip_true, blends). ``order`` "rotating": every
+    solver on each frame, the first one rotating from frame to frame; "blocked": each solver on
+    every frame, one solver after the other (see the module's docstring)."""
+    if order not in ORDERS:
+        raise ValueError(f"order must be one of {ORDERS}, not {order!r}")
     judged: dict[str, list] = {s.name: [] for s in solvers}
-    for i, (cents, cam, q, hip, blends) in enumerate(frames):
+
+    def one(s: Any, cents: Any, cam: Any, q: Any, hip: Any, blends: Any) -> None:
+        try:
+            a = s.solve(cents, cam, noise)
+        except RuntimeError as exc:  # a peer's worker died: record a failure, keep going
+            a = common.Answer(False, float("nan"), status=f"error: {exc}")
+        judged[s.name].append(judge(a, q, hip, blends))
+
+    if order == "blocked":
+        for s in solvers:
+            for frame in frames:
+                one(s, *frame)
+        return judged
+    for i, frame in enumerate(frames):
         k = i % len(solvers)
         for s in solvers[k:] + solvers[:k]:
-            try:
-                a = s.solve(cents, cam, noise)
-            except RuntimeError as exc:  # a peer's worker died: record a failure, keep going
-                a = common.Answer(False, float("nan"), status=f"error: {exc}")
-            judged[s.name].append(judge(a, q, hip, blends))
+            one(s, *frame)
     return judged
 
 
@@ -178,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
                     fr = [(f.centroids, preset.camera, f.quaternion, f.hip.tolist(), f.blends)
                           for f in scen.frames(args.frames, args.seed)]
                     quiet_heap()
-                    judged = run_frames(solvers, fr, scen.noise_px)
+                    judged = run_frames(solvers, fr, scen.noise_px, args.order)
                     row = {"camera": cam, "sweep": sweep, "value": scen.value, "scenario": scen.label,
                            "solvers": {n: summarize(js) for n, js in judged.items()}}
                     row["ratio"] = time_ratio(row["solvers"])
@@ -288,7 +308,7 @@ def run_real(args: argparse.Namespace, peers: Peers, pdir: Path) -> dict[str, An
     solvers = [SkyfixSolver(db, m, sigma=1.0) for m in sky] + ready
     fr = [(f.centroids, f.camera, f.quaternion, f.hip, None) for f in frames]
     quiet_heap()
-    judged = run_frames(solvers, fr, 1.0)
+    judged = run_frames(solvers, fr, 1.0, getattr(args, "order", "rotating"))
     per_image = {n: [{"image": f.name, "solved": j.solved, "wrong": j.wrong, "cross": j.cross_arcsec, "ms": j.ms}
                      for f, j in zip(frames, js)] for n, js in judged.items()}
     return {"skyfix_db": {"what": what, "build_s": round(build_s, 3), "size_bytes": common.dir_bytes(path)},
@@ -301,7 +321,7 @@ def render(res: dict[str, Any], args: argparse.Namespace, info: dict[str, Any], 
     out = ["## skyfix vs tetra3rs and cedar-solve", "",
            f"Command: `{cmd}`  ", f"Machine: {machine_line(info)}.", "",
            f"{args.frames} frames per point; attitudes uniform on SO(3); every solver on the same frames in "
-           "rotating order; time = in-process wall time of one solve call with the database loaded "
+           f"{getattr(args, 'order', 'rotating')} order; time = in-process wall time of one solve call with the database loaded "
            f"(median and p95 over all frames); budget {common.TIMEOUT_MS:g} ms per solve for all. "
            "Right = attitude within 360\" cross-boresight and 3600\" roll and every matched star the true one "
            "(a false star paired with a catalogue star is wrong). A cell reads: right % / wrong answers "
@@ -468,6 +488,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                          "camera (one built for each camera), comma-separated")
     ap.add_argument("--no-real", dest="real", action="store_false", help="skip the real images")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--order", choices=ORDERS, default="rotating",
+                    help="rotating: every solver on each frame in turn; blocked: each solver on all of a point's "
+                         "frames in turn (as a batch job runs one solver)")
     ap.add_argument("--db-dir", default=str(OUT / "db"))
     ap.add_argument("--reuse-db", action="store_true", help="keep skyfix databases built by an earlier run")
     ap.add_argument("--rebuild-peers", action="store_true", help="rebuild the peers' cached databases")

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
-from bench.bench_peers import split_by_peer, split_table
-from bench.common import Judged
+from bench.bench_peers import run_frames, split_by_peer, split_table
+from bench.common import Answer, Judged
 
 
 def _j(solved: bool, ms: float, wrong: bool = False) -> Judged:
@@ -28,3 +30,32 @@ def test_split_counts_frames_both_solve_and_frames_only_skyfix_solves() -> None:
 
 def test_no_skyfix_entry_no_split() -> None:
     assert split_by_peer({"tetra3rs": [_j(True, 1.0)]}) == {}
+
+
+class _Recorder:
+    """A solver that records the order it is called in (the schedule is under test, not a solver)."""
+
+    def __init__(self, name: str, log: list[tuple[str, int]]) -> None:
+        self.name, self.log = name, log
+
+    def solve(self, centroids: Any, camera: Any, noise_px: float) -> Answer:
+        self.log.append((self.name, centroids))
+        return Answer(False, 0.1, status="no_solution")
+
+
+@pytest.mark.parametrize("order", ["rotating", "blocked"])
+def test_run_frames_orders(order: str) -> None:
+    log: list[tuple[str, int]] = []
+    solvers = [_Recorder("a", log), _Recorder("b", log)]
+    frames = [(i, None, None, None, None) for i in range(3)]
+    judged = run_frames(solvers, frames, 0.5, order)
+    assert {n: len(js) for n, js in judged.items()} == {"a": 3, "b": 3}
+    if order == "blocked":  # each solver over every frame, one after the other
+        assert log == [("a", 0), ("a", 1), ("a", 2), ("b", 0), ("b", 1), ("b", 2)]
+    else:  # every solver on each frame, the first one rotating
+        assert log == [("a", 0), ("b", 0), ("b", 1), ("a", 1), ("a", 2), ("b", 2)]
+
+
+def test_run_frames_refuses_an_unknown_order() -> None:
+    with pytest.raises(ValueError, match="order"):
+        run_frames([], [], 0.5, "shuffled")

@@ -19,18 +19,25 @@ import math
 import numpy as np
 from numba import njit
 
-from .camera import project_rows
 from .blends import MIN_DELTA_MAG, dominant_kernel
+from .camera import project_rows
 from .hidden import hidden_kernel, hidden_neighbours
 from .match import CROWD
 from .methods.quad_kernel import recheck_pairs
 from .navdb.reader import NavDatabase
-from .photometry import (FAINT_GATE_MAG, MIN_PAIRS, THRESHOLD_MAG, completeness_kernel, faintest_inverted_kernel,
-                         too_bright_kernel)
+from .photometry import (
+    FAINT_GATE_MAG,
+    MIN_PAIRS,
+    THRESHOLD_MAG,
+    completeness_kernel,
+    faintest_inverted_kernel,
+    too_bright_kernel,
+)
 from .residuals import distant_kernel
 from .skygrid import collect_within
+from .star_index import field_grid, star_vec64
 from .types import IntArray
-from .verify import NEAR_MARGIN_DEG, field_grid, star_vec64
+from .verify import NEAR_MARGIN_DEG
 
 FIELD_MARGIN_DEG = 0.1
 """The field's stars are gathered this far beyond the image's half-diagonal."""

@@ -46,8 +46,16 @@ from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS
 from .methods.quad_kernel import STATUS_FOUND, quad_search
 from .navdb.reader import NavDatabase
 from .plan import fallback_next
-from .verify import (CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, Observation, Verified, Verifier, _image_probes, field_grid,
-                     marginal_choice)
+from .star_index import field_grid
+from .verify import (
+    CHECKS_PER_CHUNK,
+    NEAR_MARGIN_DEG,
+    Observation,
+    Verified,
+    Verifier,
+    _image_probes,
+    marginal_choice,
+)
 
 KIND_QUAD, KIND_MAXANGLE = 0, 1
 RAN, UNPROVABLE, SPENT = 1, 2, 3

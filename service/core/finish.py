@@ -25,9 +25,10 @@ from .navdb.reader import NavDatabase
 from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted, too_bright
 from .residuals import distant_pairs
 from .solution import answer
+from .star_index import star_tree
 from .trimmed import trimmed_basin
 from .types import Solution
-from .verify import Observation, Verified, star_tree
+from .verify import Observation, Verified
 
 if TYPE_CHECKING:
     from .pipeline import SolveOptions

@@ -50,18 +50,10 @@ from .methods.quad_kernel import (
 )
 from .navdb.reader import NavDatabase
 from .solution import answer_columns, star_hips
+from .star_index import field_grid, star_vec64
 from .trimmed import MIN_PAIRS as TRIM_MIN_PAIRS
 from .trimmed import MIN_SIGMA_PX, SUSPECT_SIGMA, _robust_sigma_px
-from .verify import (
-    NEAR_MARGIN_DEG,
-    Observation,
-    Verified,
-    Verifier,
-    _image_probes,
-    field_grid,
-    marginal_choice,
-    star_vec64,
-)
+from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier, _image_probes, marginal_choice
 
 
 @dataclass(frozen=True)

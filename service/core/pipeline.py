@@ -19,8 +19,8 @@ from .answer import recheck
 from .attitude import quat_to_matrix
 from .camera import Camera, brightest_first
 from .errors import InvalidInputError
-from .finish import solution
 from .fallback_pass import Chain, fallbacks
+from .finish import solution
 from .first_pass import deeper_arrays, first_pass, settle
 from .match import IDENTITY_MOUNTING, frame_rows
 from .methods import SolveContext, get_matcher
@@ -31,8 +31,9 @@ from .navdb.reader import NavDatabase, NavDatabaseSet
 from .plan import fallback_next, search_plan
 from .refusal import SPARSE_ADVICE_STARS, no_solution, refusal, sparse_advice
 from .solution import solution_of
+from .star_index import field_grid, star_vec64
 from .types import Centroids, Solution
-from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier, field_grid, star_vec64
+from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier
 from .wcs import tan_wcs
 
 Quaternion = Sequence[float]

@@ -26,8 +26,9 @@ from .match import _camera_rows
 from .navdb.reader import NavDatabase
 from .screen import frame_columns
 from .skygrid import collect_within, has_star_within_away
+from .star_index import field_grid, sky_grid, star_vec64
 from .types import Centroids, FloatArray, IntArray
-from .verify import Verified, Verifier, field_grid, sky_grid, star_vec64
+from .verify import Verified, Verifier
 
 SPARSE_CONFIDENCE = 0.95
 """Confidence of the Poisson upper bound on the local density of consistent triangles."""

@@ -28,7 +28,8 @@ from numba import njit
 
 from .attitude import wahba_batch, wahba_svd
 from .navdb.reader import NavDatabase
-from .verify import Verified, Verifier, star_vec64
+from .star_index import star_vec64
+from .verify import Verified, Verifier
 
 SUSPECT_SIGMA = 2.5
 """The fit's own noise (robust) over the declared centroid error beyond which it is re-examined."""

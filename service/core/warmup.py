@@ -17,9 +17,9 @@ from .navdb.reader import NavDatabase, NavDatabaseSet
 from .pipeline import _ONE_CAMERA, _could_pair_more, _observation, solve, solve_rig
 from .plan import RIG_METHOD
 from .sparse_proof import warm_up_screens
+from .star_index import sky_grid, star_tree
 from .types import Centroids, SolveStatus
-from .verify import Verified, sky_grid, star_tree
-
+from .verify import Verified
 
 MADV_POPULATE_READ = 22
 """Linux (5.14 and later): fault a mapping's pages in, as reads (Python names it from 3.12)."""

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest
@@ -11,7 +10,7 @@ from numba import njit
 from service.core.screen import screen_hits
 from service.core.skygrid import build_sky_grid, has_star_within
 from service.core.skymask import build_sky_mask, may_hold_star
-from service.core.verify import sky_mask
+from service.core.star_index import sky_mask
 
 
 @njit(cache=False)

@@ -12,7 +12,8 @@ from service.core.navdb import NavDatabase
 from service.core.pipeline import _observation
 from service.core.sim import SimConfig, simulate_frames
 from service.core.sparse_proof import _field_check
-from service.core.verify import Verifier, star_tree
+from service.core.star_index import star_tree
+from service.core.verify import Verifier
 from tests.conftest import SEED000_CAMERA
 
 

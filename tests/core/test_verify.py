@@ -16,8 +16,7 @@ from service.core.navdb import build_database, open_database
 from service.core.pipeline import SolveOptions, _observation, solve
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, simulate_frames
-from service.core.skygrid import build_sky_grid, stars_within
-from service.core.verify import Verified, Verifier, star_tree
+from service.core.verify import Verified, Verifier
 from tests.conftest import SEED000_CAMERA
 
 
@@ -149,18 +148,6 @@ def test_could_prove_is_the_bound_of_every_star_matching(seed000_db) -> None:
     assert not verifier(SEED000_CAMERA, 4, 2.5).could_prove(4)
 
 
-def test_sky_grid_agrees_with_the_kd_tree(seed000_db) -> None:
-    vec = np.asarray(seed000_db.stars.vec)
-    grid = build_sky_grid(vec)
-    rng = np.random.default_rng(3)
-    pts = rng.normal(size=(4000, 3))
-    pts /= np.linalg.norm(pts, axis=1, keepdims=True)
-    pts[:1000] = vec[rng.integers(0, len(vec), 1000)] + rng.normal(scale=2e-3, size=(1000, 3))
-    for chord in (1e-4, 1e-3, 6e-3):
-        dist, _ = star_tree(seed000_db).query(pts, k=1, distance_upper_bound=chord)
-        assert np.array_equal(stars_within(grid, pts, chord), np.isfinite(dist))
-
-
 def test_compiled_pairing_matches_the_plain_rule(seed000_db, frame) -> None:
     """The kernel's unambiguous-pair rule against a direct numpy reading of it."""
     ver = _verifier(seed000_db, frame)
@@ -196,29 +183,6 @@ def test_rig_camera_with_one_star_is_not_paired_by_a_loose_roll(default_set_db) 
     assert sol.solved
     assert 68891 not in [s.hip for s in sol.stars]
     assert score(sol, frame.frames[0].quaternion, frame.frames[0].hip.tolist(), camera=0).correct
-
-
-def test_every_field_grid_gathers_the_same_stars() -> None:
-    """field_grid picks its cell by the query's radius; whatever the cell, a gathering holds
-    exactly the stars within the chord (checked against a brute-force scan)."""
-    import math
-
-    from service.core.skygrid import build_sky_grid, collect_within
-    from service.core.verify import FIELD_CELL_DEG
-
-    gen = np.random.default_rng(4)
-    vec = gen.normal(size=(20000, 3))
-    vec /= np.linalg.norm(vec, axis=1, keepdims=True)
-    grids = [build_sky_grid(vec, cell_rad=math.radians(c)) for c in FIELD_CELL_DEG]
-    buf = np.empty(len(vec), np.int64)
-    for radius_deg in (2.0, 6.0, 11.0, 21.0):
-        chord = 2 * math.sin(math.radians(radius_deg) / 2)
-        for p in vec[:20]:
-            want = np.flatnonzero(np.linalg.norm(vec - p, axis=1) <= chord)
-            for g in grids:
-                n = collect_within(p[0], p[1], p[2], chord, g.cell, g.n_side, g.keys, g.starts, g.stars, g.vec,
-                                   g.columns, buf)
-                np.testing.assert_array_equal(np.sort(buf[:n]), want)
 
 
 @pytest.mark.parametrize("n_free", [1, 3, 6, 20])

@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..attitude import wahba_batch
+from ..star_index import star_tree
 from ..types import FloatArray, IntArray
-from ..verify import Verified, star_tree
+from ..verify import Verified
 from .base import SolveContext
 
 MAX_CHECKS = 8

@@ -32,8 +32,8 @@ from numba import njit
 from ..attitude import wahba_kernel
 from ..match import needed_hits
 from ..screen import _screen, hits_under
-from ..verify import (CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_SCREEN_FACTOR, Verified, field_grid, sky_grid,
-                      sky_mask, star_vec64)
+from ..star_index import field_grid, sky_grid, sky_mask, star_vec64
+from ..verify import CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_SCREEN_FACTOR, Verified
 from .base import SolveContext
 from .maxangle_index import query_cells, query_paper
 from .quad_kernel import keep_marginal, names_marginal, verify_pairs

@@ -64,8 +64,9 @@ import numpy as np
 from ..catalog import StarTable
 from ..geometry import angle_between
 from ..navdb.reader import NavDatabase
+from ..star_index import star_tree
 from ..types import FloatArray, IntArray
-from ..verify import Verified, star_tree
+from ..verify import Verified
 from ._grow import screen_and_grow
 from ._pairs import (
     PairLimits,

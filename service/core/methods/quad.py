@@ -25,7 +25,8 @@ import numpy as np
 from ..catalog import StarTable
 from ..errors import DatabaseCorruptError
 from ..navdb.reader import NavDatabase
-from ..verify import NEAR_MARGIN_DEG, Verified, Verifier, field_grid, sky_grid, star_vec64
+from ..star_index import field_grid, sky_grid, star_vec64
+from ..verify import NEAR_MARGIN_DEG, Verified, Verifier
 from .base import Progress, SolveContext
 from .quad_build import INLINE_LAYOUT, LAYOUT, build_quad_table
 from .quad_kernel import STATUS_FOUND, quad_search, unpack_search

@@ -58,11 +58,12 @@ from scipy.special import gammaincinv
 from ..attitude import wahba_svd
 from ..geometry import angle_between, pairwise_angles
 from ..match import _camera_rows
-from ..sparse_proof import SPARSE_CONFIDENCE, SPARSE_MAX_SAMPLE, field_check_kernel
-from ..types import FloatArray, IntArray
 from ..navdb.reader import NavDatabase
 from ..skygrid import SkyGrid, build_sky_grid
-from ..verify import FIELD_CELL_DEG, Verified, Verifier, star_vec64
+from ..sparse_proof import SPARSE_CONFIDENCE, SPARSE_MAX_SAMPLE, field_check_kernel
+from ..star_index import FIELD_CELL_DEG, star_vec64
+from ..types import FloatArray, IntArray
+from ..verify import Verified, Verifier
 from ._pairs import same_handedness
 
 RIG_SPARSE_MAX_STARS = 8
@@ -199,7 +200,7 @@ class Sky:
     grids: dict[float, SkyGrid]
 
     def grid(self, radius_deg: float) -> SkyGrid:
-        """As :func:`~service.core.verify.field_grid`: the cell suited to a radius (deg)."""
+        """As :func:`~service.core.star_index.field_grid`: the cell suited to a radius (deg)."""
         cell = max([c for c in FIELD_CELL_DEG if c <= radius_deg / 2.5], default=FIELD_CELL_DEG[0])
         if cell not in self.grids:
             self.grids[cell] = build_sky_grid(self.vec, cell_rad=math.radians(cell))

@@ -8,17 +8,24 @@ import numpy as np
 import pytest
 from scipy.special import betainc
 
-from service.core.methods import get_matcher
-from service.core.methods import quad_build
-from service.core.methods.quad_build import (FINE_STEPS, FINGER_BITS, SPILL_COUNT_MASK, SPILL_OFFSET_MASK, SPILL_OVER,
-                                             build_quad_table, field_scales)
+from service.core.methods import get_matcher, quad_build
 from service.core.methods.quad import QuadMatcher
+from service.core.methods.quad_build import (
+    FINE_STEPS,
+    FINGER_BITS,
+    SPILL_COUNT_MASK,
+    SPILL_OFFSET_MASK,
+    SPILL_OVER,
+    build_quad_table,
+    field_scales,
+)
 from service.core.methods.quad_kernel import STATUS_FOUND, binomial_tail
 from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
 from service.core.pipeline import SolveOptions, _observation, solve
 from service.core.sim import SimConfig, random_points, simulate_frames
+from service.core.star_index import star_vec64
 from service.core.types import SolveStatus
-from service.core.verify import Verifier, star_vec64
+from service.core.verify import Verifier
 from tests.conftest import SEED000_CAMERA
 
 CAM = SEED000_CAMERA

@@ -21,9 +21,9 @@ from numba import njit
 
 from .blends import MIN_DELTA_MAG, dominant_kernel
 from .camera import project_rows
+from .check_kernel import recheck_pairs
 from .hidden import hidden_kernel, hidden_neighbours
 from .match import CROWD
-from .methods.quad_kernel import recheck_pairs
 from .navdb.reader import NavDatabase
 from .photometry import (
     FAINT_GATE_MAG,

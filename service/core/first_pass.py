@@ -11,7 +11,7 @@ Python between them run in one (:func:`first_pass_kernel`):
    002's);
 2. when the plan's deepest member is another one, the answer re-verified against its deeper
    star table (what ``pipeline._refine`` does with :func:`~.answer.recheck`), unless no
-   unpaired star lies near one of its stars (:func:`~.methods.quad_kernel.could_pair_more`);
+   unpaired star lies near one of its stars (:func:`~.check_kernel.could_pair_more`);
 3. the answer's checks: close doubles named, implausible pairs dropped
    (:func:`~.answer.answer_kernel`);
 4. the final fit: Wahba refit if the pairs changed, residuals, RMS and the pooled 1-sigma
@@ -36,18 +36,11 @@ from numba import njit
 
 from .answer import FIELD_MARGIN_DEG, answer_kernel, star_mags
 from .attitude import PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
+from .check_kernel import RECHECK_REACH, could_pair_more, recheck_pairs
 from .hidden import hidden_neighbours
 from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
-from .methods.quad_kernel import (
-    RECHECK_REACH,
-    STATUS_FOUND,
-    STATUS_MARGINAL,
-    could_pair_more,
-    pack_search,
-    quad_search,
-    recheck_pairs,
-)
+from .methods.quad_kernel import STATUS_FOUND, STATUS_MARGINAL, pack_search, quad_search
 from .navdb.reader import NavDatabase
 from .solution import answer_columns, star_hips
 from .star_index import field_grid, star_vec64

@@ -18,6 +18,7 @@ import numpy as np
 from .answer import recheck
 from .attitude import quat_to_matrix
 from .camera import Camera, brightest_first
+from .check_kernel import RECHECK_REACH, could_pair_more
 from .errors import InvalidInputError
 from .fallback_pass import Chain, fallbacks
 from .finish import solution
@@ -26,7 +27,7 @@ from .match import IDENTITY_MOUNTING, frame_rows
 from .methods import SolveContext, get_matcher
 from .methods.quad import MIN_STARS as QUAD_MIN_STARS
 from .methods.quad import QUERY_STARS
-from .methods.quad_kernel import RECHECK_REACH, STATUS_NONE, could_pair_more
+from .methods.quad_kernel import STATUS_NONE
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .plan import fallback_next, search_plan
 from .refusal import SPARSE_ADVICE_STARS, no_solution, refusal, sparse_advice
@@ -331,7 +332,7 @@ def _refine(
 def _could_pair_more(obs: Observation, deeper: NavDatabase, found: Verified, radius_px: float) -> bool:
     """False if no observed star outside ``found`` lies near a star of ``deeper`` under its
     attitude, so that re-verifying there cannot name more stars (one camera; see
-    :func:`~.methods.quad_kernel.could_pair_more`)."""
+    :func:`~.check_kernel.could_pair_more`)."""
     g = field_grid(deeper, obs.cameras[0].diagonal_fov_deg / 2 + NEAR_MARGIN_DEG)  # the recheck's own grid
     chord = RECHECK_REACH * radius_px * obs.pixel_scale_rad
     return bool(could_pair_more(obs.vec, found.obs.astype(np.int64), np.array(found.matrix, np.float64), chord,

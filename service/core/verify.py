@@ -275,7 +275,7 @@ class Verifier:
             return None
         trials = self.trials if n_trials is None else n_trials
         if len(self.obs.cameras) == 1 and self.min_matches == 4:
-            # one camera: the same steps as one compiled call (quad_kernel.verify_pairs; ~10 us
+            # one camera: the same steps as one compiled call (check_kernel.verify_pairs; ~10 us
             # where these Python steps take ~70)
             from .answer import recheck  # (answer imports this module)
             ok, m_obs, m_cat, r, prob = recheck(self.obs, self.db, obs_idx, cat_idx, max(trials, 1),

@@ -22,7 +22,8 @@ from ..conftest import ROOT
 KERNELS = {
     "service.core.first_pass": ["first_pass_kernel", "settle_kernel"],
     "service.core.fallback_pass": ["chain_kernel", "_maxangle_pass"],
-    "service.core.methods.quad_kernel": ["quad_search", "verify_pairs", "recheck_pairs", "_verify", "could_pair_more"],
+    "service.core.methods.quad_kernel": ["quad_search", "_verify"],
+    "service.core.check_kernel": ["verify_pairs", "recheck_pairs", "could_pair_more"],
     "service.core.match": ["_refine", "_match_rig", "_wahba_pairs"],
     "service.core.answer": ["answer_kernel"],
     "service.core.methods.maxangle": ["_triangles_of"],

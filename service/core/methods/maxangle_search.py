@@ -9,8 +9,8 @@ many chunks per call (:func:`search_chunks`):
 
 - the look-up (:func:`~.maxangle_index.query_cells` or :func:`~.maxangle_index.query_paper`);
 - the screen (:func:`~service.core.screen._screen`);
-- up to ``max_checks`` candidates checked best first (:func:`~.quad_kernel.verify_pairs`, what
-  ``Verifier.check`` calls for one camera);
+- up to ``max_checks`` candidates checked best first
+  (:func:`~service.core.check_kernel.verify_pairs`, what ``Verifier.check`` calls for one camera);
 - the verifier's counting: every candidate is a trial, a hypothesis a marginal answer already
   names is counted and skipped, a marginal answer is kept aside, and the search stops once one
   has had ``confirm_patterns`` patterns to be beaten or ``trial_limit`` hypotheses were tried.
@@ -30,13 +30,13 @@ import numpy as np
 from numba import njit
 
 from ..attitude import wahba_kernel
+from ..check_kernel import keep_marginal, names_marginal, verify_pairs
 from ..match import needed_hits
 from ..screen import _screen, hits_under
 from ..star_index import field_grid, sky_grid, sky_mask, star_vec64
 from ..verify import CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_SCREEN_FACTOR, Verified
 from .base import SolveContext
 from .maxangle_index import query_cells, query_paper
-from .quad_kernel import keep_marginal, names_marginal, verify_pairs
 
 TRIANGLES_PER_CALL = 64
 """Observed triangles one call may search before Python checks the clock again (a 7-star frame's

@@ -19,14 +19,16 @@ Every candidate that passes the angle test is a trial. A strong answer (``P <=
 strong_false_prob``) ends the search; a marginal one (``P <= max_false_prob``) is kept, and the
 search goes on for ``confirm_patterns`` more patterns, as the verifier does. A candidate whose
 four pairs a kept marginal answer already makes is counted as a trial but not checked
-(:func:`names_marginal`) when that answer is *closed*: it pairs every star of the frame, or no
-unpaired star lies within :data:`RECHECK_REACH` match radii of a catalogue star under its
-attitude (:func:`could_pair_more`), so a check from another pattern could only reach the same
-pairs again. (Seed 002's 6-star frames, where 4 + 2 stars are marginal at 4096 px, checked the
-same identification through each of their 15 patterns: 82 -> 36 us a search. Without the
-closed condition a later check sometimes pairs one more star, and 14 frames of 47,500 named one
-star fewer.) The work is bounded inside the loop (``max_probes`` hash probes, ``max_checks``
-full verifications), not by a clock between Python batches.
+(:func:`~service.core.check_kernel.names_marginal`) when that answer is *closed*: it pairs
+every star of the frame, or no unpaired star lies within
+:data:`~service.core.check_kernel.RECHECK_REACH` match radii of a catalogue star under its
+attitude (:func:`~service.core.check_kernel.could_pair_more`), so a check from another pattern
+could only reach the same pairs again. (Seed 002's 6-star frames, where 4 + 2 stars are
+marginal at 4096 px, checked the same identification through each of their 15 patterns: 82 ->
+36 us a search. Without the closed condition a later check sometimes pairs one more star, and 14
+frames of 47,500 named one star fewer.) The work is bounded inside the loop (``max_probes`` hash
+probes, ``max_checks`` full verifications), not by a clock between Python batches. The checks
+themselves are :mod:`service.core.check_kernel`'s.
 """
 
 from __future__ import annotations
@@ -37,14 +39,24 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from ..match import _match_rig, _refine, _wahba_pairs, binomial_tail, needed_hits
-from ..screen import hits_under
-from ..skygrid import collect_within, has_star_within
 from ..attitude import wahba_kernel
+from ..check_kernel import RECHECK_REACH, could_pair_more, keep_marginal, names_marginal, verify_pairs
+from ..match import needed_hits
 from ..prefetch import prefetch
-from ..verify import NEED_SCREEN_FACTOR, SETTLE_FACTORS
-from .quad_build import (FINE_BITS, FINE_STEPS, FINGER_BITS, N_RATIO_BINS, SPILL_COUNT_MASK, SPILL_OFFSET_MASK,
-                         combine_key, key_hash, row_angle, sorted_edges)
+from ..screen import hits_under
+from ..verify import NEED_SCREEN_FACTOR
+from .quad_build import (
+    FINE_BITS,
+    FINE_STEPS,
+    FINGER_BITS,
+    N_RATIO_BINS,
+    SPILL_COUNT_MASK,
+    SPILL_OFFSET_MASK,
+    combine_key,
+    key_hash,
+    row_angle,
+    sorted_edges,
+)
 
 PERMS = np.array([[a, b, c, d] for a in range(4) for b in range(4) for c in range(4) for d in range(4)
                   if len({a, b, c, d}) == 4], dtype=np.int64)
@@ -57,9 +69,6 @@ a small pattern at 2 px of noise has its ratios known so loosely that its bins m
 the six coordinates (9 bins a ratio: 9^5 x 3 = 177,000 probes), each probe a likely cache miss,
 and it matches hundreds of catalogue patterns. Skipping such patterns lost frames that only a
 tight cluster proves (the Pleiades' brightest, 50,000-65,000 probes a pattern), so they wait."""
-SETTLE = np.array(SETTLE_FACTORS, dtype=np.float64)
-NEAR_REUSE_COS = math.cos(math.radians(0.3))
-"""A gathered field is reused while the boresight moves less than this (its margin is 0.5 deg)."""
 
 FINGER_MASK = (1 << FINGER_BITS) - 1
 STATUS_NONE, STATUS_FOUND, STATUS_MARGINAL = 0, 1, 2
@@ -382,45 +391,6 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
 
 
 @njit(cache=True, nogil=True)
-def names_marginal(o, c, marg_off, marg_obs, marg_cat, n_marg, closed=None):
-    """Does one of the ``n_marg`` marginal answers (pairs ``marg_obs``/``marg_cat`` of answer ``k``
-    in ``marg_off[k]:marg_off[k + 1]``) pair every observed row ``o[i]`` with catalogue row
-    ``c[i]`` (:meth:`~service.core.verify.Verifier.names_marginal`)? With ``closed``, only the
-    answers it marks count (``quad``'s kernel: those no check could grow)."""
-    for k in range(n_marg):
-        if closed is not None and not closed[k]:
-            continue
-        every = True
-        for i in range(len(o)):
-            hit = False
-            for j in range(marg_off[k], marg_off[k + 1]):
-                if marg_obs[j] == o[i]:
-                    hit = marg_cat[j] == c[i]
-                    break
-            if not hit:
-                every = False
-                break
-        if every:
-            return True
-    return False
-
-
-@njit(cache=True, nogil=True)
-def keep_marginal(marg_r, marg_prob, marg_trials, marg_off, marg_obs, marg_cat, n_marg, r, prob, trials, m_obs,
-                  m_cat):
-    """Store a marginal answer (attitude ``r``, bound ``prob`` after ``trials`` hypotheses, pairs
-    ``m_obs`` -> ``m_cat``) as answer ``n_marg`` of the ``marg_*`` arrays; returns the count."""
-    marg_r[n_marg] = r
-    marg_prob[n_marg] = prob
-    marg_trials[n_marg] = trials
-    k0 = marg_off[n_marg]
-    marg_obs[k0:k0 + len(m_obs)] = m_obs
-    marg_cat[k0:k0 + len(m_obs)] = m_cat
-    marg_off[n_marg + 1] = k0 + len(m_obs)
-    return n_marg + 1
-
-
-@njit(cache=True, nogil=True)
 def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s_side, s_keys, s_starts,
             s_stars, s_columns, g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, mount, buf,
             near_state, mounts, cams, dist, rows, row_off, radius_px, quick_tol, trials, max_false_prob):
@@ -445,118 +415,6 @@ def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s
     return verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
                         near_chord, mount, buf, near_state, mounts, cams, dist, rows, row_off, radius_px,
                         quick_tol, trials)
-
-
-@njit(cache=True, nogil=True)
-def verify_pairs(obs_vec, obs_xy, star_vec, o, lab, r, g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
-                 near_chord, mount, buf, near_state, mounts, cams, dist, rows, row_off, radius_px, quick_tol, trials):
-    """The hypothesis "observed rows ``o`` are catalogue rows ``lab``" (any number of pairs; one
-    camera) at attitude ``r`` through :meth:`~service.core.verify.Verifier.check`'s steps after
-    its screen: pairing and refits, the near-miss test, and the coincidence bound multiplied by
-    ``trials``. Returns ``(ok, m_obs, m_cat, r, prob)``. ``buf`` (a row per catalogue star) and
-    ``near_state`` (4,) hold the gathered field between calls (:func:`_field`)."""
-    empty = np.zeros(0, np.int64)
-    n_obs = len(obs_vec)
-    near = _field(r, mount, near_state, near_chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec,
-                  g_columns, buf)
-    near_off = np.array([0, len(near)], np.int64)
-    ok, m_obs, m_cat, p_single, r = _refine(obs_vec, obs_xy, star_vec, o, lab, r, quick_tol, near, near_off,
-                                            mounts, cams, dist, rows, row_off, radius_px, np.int64(4))
-    if not ok:
-        return False, empty, empty, r, 1.0
-    n_pairs = len(m_obs)
-    for f in range(len(SETTLE)):  # the verifier's near-miss test (Verifier._settle)
-        if n_obs <= n_pairs + max(3, n_pairs // 3):
-            break  # the wide pairing cannot grow enough: too few stars are left unpaired
-        near = _field(r, mount, near_state, near_chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec,
-                      g_columns, buf)
-        near_off[1] = len(near)
-        w_obs, w_cat, _ = _match_rig(r, obs_xy, star_vec, near, near_off, mounts, cams, dist, rows, row_off,
-                                     SETTLE[f] * radius_px, 1.0)
-        if len(w_obs) <= n_pairs + max(3, n_pairs // 3):
-            continue
-        r2 = _wahba_pairs(obs_vec, star_vec, w_obs, w_cat)
-        near = _field(r2, mount, near_state, near_chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec,
-                      g_columns, buf)
-        near_off[1] = len(near)
-        ok2, s_obs, s_cat, p2, r2 = _refine(obs_vec, obs_xy, star_vec, w_obs[:0], w_cat[:0], r2, 1.0, near,
-                                            near_off, mounts, cams, dist, rows, row_off, radius_px, np.int64(4))
-        if not ok2 or len(s_obs) <= n_pairs:
-            continue
-        m_obs, m_cat, p_single, r = s_obs, s_cat, p2, r2
-        n_pairs = len(m_obs)
-    n_hyp = 0
-    for i in range(len(m_obs)):
-        for j in range(len(o)):
-            if m_obs[i] == o[j]:
-                n_hyp += 1
-                break
-    n_extra = len(m_obs) - n_hyp
-    n_free = n_obs - len(o)
-    if len(m_obs) < 4 or n_extra < 1:
-        return False, empty, empty, r, 1.0
-    tail = binomial_tail(n_free, n_extra, min(p_single, 1.0)) if n_free >= n_extra else 1.0
-    prob = min(1.0, tail * max(trials, 1))
-    return True, m_obs, m_cat, r, prob
-
-
-@njit(cache=True, nogil=True)
-def recheck_pairs(obs_vec, obs_xy, star_vec, obs_idx, cat_idx, g_cell, g_side, g_keys, g_starts, g_stars, g_columns,
-                  near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale, trials):
-    """:func:`verify_pairs` of the pairs ``obs_idx`` -> ``cat_idx`` at their own Wahba attitude
-    (re-verifying an answer against another member's star table: ``star_vec`` and its grid).
-    Returns ``(ok, m_obs, m_cat, r, prob)``."""
-    r = wahba_kernel(obs_vec[obs_idx], star_vec[cat_idx], np.ones(len(obs_idx)))
-    return verify_pairs(obs_vec, obs_xy, star_vec, obs_idx, cat_idx, r, g_cell, g_side, g_keys, g_starts, g_stars,
-                        g_columns, near_chord, mounts[0], np.empty(len(star_vec), np.int64), np.zeros(4), mounts,
-                        cams, dist, rows, row_off, radius_px, 1.5 * radius_px * pixel_scale, trials)
-
-
-RECHECK_REACH = SETTLE[-1] + 1.0
-"""Match radii around an unpaired observed star within which another member's star must lie
-for :func:`recheck_pairs` to pair more stars (the near-miss test's widest radius, and one more
-for the refit's move)."""
-
-
-@njit(cache=True, nogil=True)
-def could_pair_more(obs_vec, paired, r, chord, cell, n_side, keys, starts, stars, star_vec, columns):
-    """True if some observed star not in ``paired`` lies within ``chord`` (unit-vector
-    distance) of a star of ``star_vec`` under ``r`` (ICRS -> body).
-
-    An answer re-verified against another member (:func:`recheck_pairs`) can name more stars
-    only through such a star: with ``chord`` at :data:`RECHECK_REACH` match radii, a frame
-    whose every unpaired star is farther from that member's stars skips the recheck (~15 us).
-    """
-    taken = np.zeros(len(obs_vec), np.bool_)
-    for i in paired:
-        taken[i] = True
-    for m in range(len(obs_vec)):
-        if taken[m]:
-            continue
-        v = obs_vec[m]
-        px = r[0, 0] * v[0] + r[1, 0] * v[1] + r[2, 0] * v[2]
-        py = r[0, 1] * v[0] + r[1, 1] * v[1] + r[2, 1] * v[2]
-        pz = r[0, 2] * v[0] + r[1, 2] * v[1] + r[2, 2] * v[2]
-        if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, -1, -1, -1):
-            return True
-    return False
-
-
-@njit(cache=True, nogil=True)
-def _field(r, mount, state, chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec, g_columns, buf):
-    """The catalogue rows near the boresight under ``r`` (a view of ``buf``), reusing the last
-    gathering while the boresight stays within 0.3 deg of it (the verifier's ``_near`` cache).
-    ``state`` (4,): the gathering's size and boresight, updated in place."""
-    rc = mount @ r
-    n = int(state[0])
-    dot = rc[2, 0] * state[1] + rc[2, 1] * state[2] + rc[2, 2] * state[3]
-    if n > 0 and dot >= NEAR_REUSE_COS:
-        return buf[:n]
-    n = collect_within(rc[2, 0], rc[2, 1], rc[2, 2], chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec,
-                       g_columns, buf)
-    state[0] = n
-    state[1], state[2], state[3] = rc[2, 0], rc[2, 1], rc[2, 2]
-    return buf[:n]
 
 
 def unpack_search(ints: np.ndarray, floats: np.ndarray) -> tuple[Any, ...]:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.special import betainc
 
+from service.core.match import binomial_tail
 from service.core.methods import get_matcher, quad_build
 from service.core.methods.quad import QuadMatcher
 from service.core.methods.quad_build import (
@@ -19,7 +20,7 @@ from service.core.methods.quad_build import (
     build_quad_table,
     field_scales,
 )
-from service.core.methods.quad_kernel import STATUS_FOUND, binomial_tail
+from service.core.methods.quad_kernel import STATUS_FOUND
 from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
 from service.core.pipeline import SolveOptions, _observation, solve
 from service.core.sim import SimConfig, random_points, simulate_frames
@@ -236,7 +237,7 @@ def test_a_repeat_of_an_answer_that_no_check_could_grow_is_not_checked(default_s
 
 
 def test_names_marginal_asks_every_pair_of_the_hypothesis_of_a_counted_answer() -> None:
-    from service.core.methods.quad_kernel import names_marginal
+    from service.core.check_kernel import names_marginal
 
     off = np.array([0, 5, 11], np.int64)
     m_obs = np.array([0, 1, 2, 3, 4, 0, 1, 2, 3, 5, 4], np.int64)

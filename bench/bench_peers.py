@@ -203,6 +203,7 @@ def run(args: argparse.Namespace) -> int:
                            "solvers": {n: summarize(js) for n, js in judged.items()}}
                     row["ratio"] = time_ratio(row["solvers"])
                     row["split"] = split_by_peer(judged)
+                    row["per_frame"] = per_frame(judged)
                     results["sweeps"].append(row)
                     print(f"[{cam} {sweep} {scen.value:g}] " + "  ".join(
                         f"{n}: {fmt(s['rate'], 1, True)} {s['wrong']}w {fmt(s['ms_median'])}ms"
@@ -244,6 +245,15 @@ def time_ratio(solvers: dict[str, dict[str, Any]]) -> dict[str, Any]:
     fastest = min(peers, key=peers.get)
     return {"fastest_peer": fastest, **{n: s["ms_median"] / peers[fastest] for n, s in solvers.items()
                                         if n.startswith("skyfix") and s["ms_median"]}}
+
+
+def per_frame(judged: dict[str, list]) -> dict[str, dict[str, list]]:
+    """Each solver's time (ms, 4 decimals) and outcome on every frame of a point, in frame
+    order: "right", "wrong" or "none" (``peers.json`` ``per_frame``; any figure of a point,
+    such as the median of the frames one solver refuses, can be taken from it afresh)."""
+    return {name: {"ms": [round(j.ms, 4) for j in js],
+                   "outcome": ["wrong" if j.solved and j.wrong else "right" if j.solved else "none" for j in js]}
+            for name, js in judged.items()}
 
 
 def split_by_peer(judged: dict[str, list]) -> dict[str, dict[str, Any]]:

@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from bench.bench_peers import run_frames, split_by_peer, split_table
+from bench.bench_peers import per_frame, run_frames, split_by_peer, split_table
 from bench.common import Answer, Judged
 
 
@@ -59,3 +59,11 @@ def test_run_frames_orders(order: str) -> None:
 def test_run_frames_refuses_an_unknown_order() -> None:
     with pytest.raises(ValueError, match="order"):
         run_frames([], [], 0.5, "shuffled")
+
+
+def test_per_frame_keeps_every_frame_in_order() -> None:
+    judged = {"skyfix auto": [_j(True, 1.23456), _j(False, 0.5), _j(True, 2.0, wrong=True)],
+              "tetra3rs": [_j(False, 0.01), _j(True, 0.2), _j(True, 0.3)]}
+    got = per_frame(judged)
+    assert got["skyfix auto"] == {"ms": [1.2346, 0.5, 2.0], "outcome": ["right", "none", "wrong"]}
+    assert got["tetra3rs"]["outcome"] == ["none", "right", "right"]

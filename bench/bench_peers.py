@@ -331,7 +331,8 @@ def render(res: dict[str, Any], args: argparse.Namespace, info: dict[str, Any], 
     out = ["## skyfix vs tetra3rs and cedar-solve", "",
            f"Command: `{cmd}`  ", f"Machine: {machine_line(info)}.", "",
            f"{args.frames} frames per point; attitudes uniform on SO(3); every solver on the same frames in "
-           f"{getattr(args, 'order', 'rotating')} order; time = in-process wall time of one solve call with the database loaded "
+           f"{getattr(args, 'order', 'rotating')} order; time = in-process wall time of one solve call with the "
+           "database loaded "
            f"(median and p95 over all frames); budget {common.TIMEOUT_MS:g} ms per solve for all. "
            "Right = attitude within 360\" cross-boresight and 3600\" roll and every matched star the true one "
            "(a false star paired with a catalogue star is wrong). A cell reads: right % / wrong answers "

@@ -379,11 +379,7 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
                                         s_stars, star_vec, s_columns)
                                 if first_marg < 0:
                                     first_marg = n_pat
-                for i in range(6):  # next bin combination
-                    cur[i] += 1
-                    if cur[i] <= hi[i]:
-                        break
-                    cur[i] = lo[i]
+                _next_bin(cur, r_lo, r_hi, row)
     status = STATUS_MARGINAL if n_marg else STATUS_NONE
     return (status, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, exhausted and n_marg == 0,
             marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1], marg_obs[:marg_off[n_marg]],

@@ -47,6 +47,7 @@ def search_plan(db: NavDatabase | NavDatabaseSet, cameras: list[Camera], method:
         # one camera: a member that holds the rig method alone (the default set's ``rig``) is
         # left to rigs when another member serves the camera
         method_lists = [[] if ms == [RIG_METHOD] else ms for ms in method_lists]
+        method_lists = covered_fallbacks(members, method_lists, cameras[0].diagonal_fov_deg)
     if len(cache) >= PLAN_CACHE_SIZE:
         cache.clear()
     cache[key] = (member_order(members, method_lists), deepest)
@@ -67,6 +68,36 @@ def rig_methods(methods: list[str]) -> list[str]:
         return methods
     rest = [m for m in methods if m != RIG_METHOD]
     return [rest[0], RIG_METHOD, *rest[1:]] if rest else [RIG_METHOD]
+
+
+def maxangle_reach_deg(member: NavDatabase) -> float:
+    """The longest triangle side (degrees) ``member``'s ``maxangle`` table holds (0 without one)."""
+    if "maxangle" not in member.tables:
+        return 0.0
+    return float(member.method_params("maxangle")["d_max_deg"])
+
+
+def covered_fallbacks(members: list[NavDatabase], method_lists: list[list[str]], diagonal_deg: float
+                      ) -> list[list[str]]:
+    """``auto``'s methods per member for one camera of diagonal ``diagonal_deg``, without the
+    fallbacks of a member searched after one whose ``maxangle`` table holds every triangle of
+    the camera's field (``d_max`` at least the diagonal) while its own holds only part of it.
+
+    The default set's ``mid`` sees the whole field of seed 000's 8.6-deg camera; ``narrow``,
+    after it, holds triangles to 3.5 deg only. On that camera ``narrow``'s ``quad`` proved 33 of
+    9,000 simulated frames that ``mid`` missed (0.5-2 px, 0-5 false stars), its ``maxangle`` and
+    ``pyramid`` none, while its ``maxangle`` took ~0.26 ms of every random-point frame's ~1.2
+    (session 20, docs/performance.md). Its ``quad`` stays: that is the first pass of each member.
+    """
+    covering = False
+    out = []
+    for member, methods in zip(members, method_lists, strict=True):
+        reach = maxangle_reach_deg(member)
+        if covering and reach < diagonal_deg and len(methods) > 1:
+            methods = methods[:1]
+        out.append(methods)
+        covering = covering or ("maxangle" in methods and reach >= diagonal_deg)
+    return out
 
 
 def member_order(members: list[NavDatabase], method_lists: list[list[str]]) -> list[tuple[NavDatabase, list[str]]]:

@@ -88,10 +88,12 @@ def test_frames_of_more_stars_than_quad_looks_at_take_the_plans_order(monkeypatc
         assert not fused.solved and fused.methods_tried == ("quad", "maxangle")
     assert len(calls) == 4 and all(c is not None for c in calls)
     if budget is None:
-        assert all(c.tried == ["quad", "maxangle", "maxangle"] for c in calls)
+        assert all(c.tried == ["quad", "maxangle"] for c in calls)
     plan, _ = search_plan(default_set_db, [p.camera], "auto", 1.0)
     names = [(m.path.name, kind) for m, kind in fallback_passes(plan, small=False)]
-    assert names == [("narrow", KIND_QUAD), ("mid", KIND_MAXANGLE), ("narrow", KIND_MAXANGLE)]
+    # narrow's maxangle (triangles to 3.5 deg) is left out: mid's sees the camera's whole field
+    assert names == [("narrow", KIND_QUAD), ("mid", KIND_MAXANGLE)]
+    assert [(m.path.name, kind) for m, kind in fallback_passes(plan)] == [("mid", KIND_MAXANGLE), ("narrow", KIND_QUAD)]
 
 
 def test_a_spent_budget_is_counted_as_the_general_loop_counts_it(monkeypatch, default_set_db) -> None:

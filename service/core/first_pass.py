@@ -10,7 +10,7 @@ Python between them run in one (:func:`first_pass_kernel`):
    ``Verifier.best_marginal``'s own choice: ~3.5% of seed 000's and 001's frames, 12% of seed
    002's);
 2. when the plan's deepest member is another one, the answer re-verified against its deeper
-   star table (what ``pipeline._refine`` does with :func:`~.answer.recheck`), unless no
+   star table (what ``deeper.refine_deeper`` does with :func:`~.answer.recheck`), unless no
    unpaired star lies near one of its stars (:func:`~.check_kernel.could_pair_more`);
 3. the answer's checks: close doubles named, implausible pairs dropped
    (:func:`~.answer.answer_kernel`);
@@ -110,12 +110,15 @@ class FirstPass(NamedTuple):
 
 
 def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigma_px: float,
-               match_radius_px: float | None, max_false_prob: float) -> FirstPass:
+               match_radius_px: float | None, max_false_prob: float, static: tuple[Any, ...] | None = None
+               ) -> FirstPass:
     """``auto``'s first pass on a one-camera observation: ``quad`` on ``member``, the answer
     re-verified against ``deepest`` (if another member), checked and fitted, in one compiled
-    call. ``sigma_px``: the declared centroid error (px, per axis)."""
+    call. ``sigma_px``: the declared centroid error (px, per axis); ``static``: the call's
+    :func:`_static_args` for these, if the caller keeps them."""
     k = obs.kernel_arrays
-    static = _static_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob)
+    if static is None:
+        static = _static_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob)
     flux = obs.flux if obs.flux is not None else _NO_FLUX
     probes = _image_probes(obs)
     solved, used_deep, ints, floats = first_pass_kernel(obs.vec, obs.xy, flux, obs.flux is not None, k.mounts,
@@ -285,7 +288,7 @@ def settle_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row
         a_stars, a_columns, mag, hidden, hidden_lim
     if has_deep and could_pair_more(obs_vec, m_obs, r, RECHECK_REACH * radius_px * pixel_scale, d_cell, d_side,
                                      d_keys, d_starts, d_stars, d_vec, d_columns):
-        # pipeline._refine: the stars the deeper member holds are the hypothesis
+        # deeper.refine_deeper: the stars the deeper member holds are the hypothesis
         n_known = 0
         for c in m_cat:
             if deep_rows[c] >= 0:

@@ -15,14 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from .answer import recheck
 from .attitude import quat_to_matrix
 from .camera import Camera, brightest_first
-from .check_kernel import RECHECK_REACH, could_pair_more
+from .camera_setup import SETUP_SIZES_KEPT, CameraSetup, keep_setup, kept_setup
+from .deeper import refine_deeper
 from .errors import InvalidInputError
 from .fallback_pass import Chain, fallbacks
 from .finish import solution
-from .first_pass import deeper_arrays, first_pass, settle
+from .first_pass import _static_args, first_pass, settle
 from .match import IDENTITY_MOUNTING, frame_rows
 from .methods import SolveContext, get_matcher
 from .methods.quad import MIN_STARS as QUAD_MIN_STARS
@@ -32,9 +32,8 @@ from .navdb.reader import NavDatabase, NavDatabaseSet
 from .plan import fallback_next, search_plan
 from .refusal import SPARSE_ADVICE_STARS, no_solution, refusal, sparse_advice
 from .solution import solution_of
-from .star_index import field_grid, star_vec64
 from .types import Centroids, Solution
-from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier
+from .verify import Observation, Verified, Verifier, _image_probes
 from .wcs import tan_wcs
 
 Quaternion = Sequence[float]
@@ -200,14 +199,28 @@ def solve_rig(
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     given = db  # (``db`` names the member being searched below)
-    plan, deepest = search_plan(db, [cam for _, cam, _ in frames], method, options.centroid_sigma_px)
-    refused = refusal(frames, db, method, t0, options.centroid_sigma_px)
-    if refused is not None:
-        return refused
-    _ensure_warm(db)  # one-off per opened database; not charged to this frame's time limit
+    one = _mountings is _ONE_CAMERA and hint is None  # solve()'s frame
+    setup = kept_setup(db, frames[0][1], method, options) if one else None
+    if setup is not None and len(frames[0][0]) >= 3:  # its camera was planned and not refused
+        plan, deepest = setup.plan, setup.deepest
+    else:
+        setup = None
+        plan, deepest = search_plan(db, [cam for _, cam, _ in frames], method, options.centroid_sigma_px)
+        refused = refusal(frames, db, method, t0, options.centroid_sigma_px)
+        if refused is not None:
+            return refused
+        _ensure_warm(db)  # one-off per opened database; not charged to this frame's time limit
     t0 = time.perf_counter()
     mountings = _mountings or [np.eye(3) if m is None else quat_to_matrix(np.asarray(m, float)) for _, _, m in frames]
     obs = _observation(frames, mountings)
+    if setup is not None:  # what the first pass asks of the observation, kept with the camera
+        obs.__dict__["_image_probes"] = setup.probes
+        arrays = setup.arrays.get(len(obs))
+        if arrays is None:
+            arrays = obs.kernel_arrays
+            if len(setup.arrays) < SETUP_SIZES_KEPT:
+                setup.arrays[len(obs)] = arrays
+        obs.__dict__["_kernel_arrays"] = arrays
     t1 = time.perf_counter()
     timings["vectors"] = (t1 - t0) * 1e3
     deadline = t0 + options.timeout_ms / 1e3
@@ -222,7 +235,13 @@ def solve_rig(
     if COMPILED_FIRST_PASS and plain and quad_first and len(obs.cameras) == 1 and len(obs) >= 5:
         # auto's first pass in one compiled call (service.core.first_pass); a frame it does not
         # prove goes on below with the search's result in hand (QuadMatcher takes it up)
-        fp = first_pass(obs, plan[0][0], deepest, sigmas[0], options.match_radius_px, options.max_false_prob)
+        if setup is None and one and not obs.cameras[0].distortion:
+            setup = CameraSetup(frames[0][1], options, method, plan, deepest,
+                                _static_args(plan[0][0], deepest, obs.cameras[0], sigmas[0], options.match_radius_px,
+                                             options.max_false_prob), _image_probes(obs))
+            keep_setup(db, setup)
+        fp = first_pass(obs, plan[0][0], deepest, sigmas[0], options.match_radius_px, options.max_false_prob,
+                        None if setup is None else setup.static)
         if fp.solved:
             t2 = time.perf_counter()
             timings["identify"] = (t2 - t1) * 1e3
@@ -281,7 +300,7 @@ def solve_rig(
             sol = solution_of(*st.columns, st.rms_arcsec, st.sigma_arcsec, st.false_prob, used)
             return _stamped(sol, tried, timings, t0, t2)
     if deepest is not db:
-        refined = _refine(obs, db, deepest, found, sigma, options)
+        refined = refine_deeper(obs, db, deepest, found, sigma, options.match_radius_px, options.max_false_prob)
         if refined is not None:
             db, found = deepest, refined
     return _stamped(solution(obs, db, found, used, sigma * obs.pixel_scale_rad, options), tried, timings, t0, t2)
@@ -300,43 +319,6 @@ def _stamped(sol: Solution, tried: list[str], timings: dict[str, float], t0: flo
 _IDENTITY = IDENTITY_MOUNTING  # the one rig_arrays recognises
 
 _ONE_CAMERA = [_IDENTITY]
-
-
-def _refine(
-    obs: Observation, db: NavDatabase, deeper: NavDatabase, found: Verified, sigma: float, options: SolveOptions
-) -> Verified | None:
-    """Re-verify an answer found in ``db`` against the deeper star table of ``deeper``: its
-    stars that ``deeper`` also holds are the hypothesis, the newly matched ones the evidence,
-    and every hypothesis already tried still counts. None if it adds nothing provable."""
-    rows = deeper_arrays(db, deeper).rows[found.cat]  # by HIP, the map built once per pair of members
-    known = rows >= 0
-    if known.sum() < 3:
-        return None
-    radius = options.match_radius_px or max(2.5, 3.0 * sigma)
-    if len(obs.cameras) == 1 and not _could_pair_more(obs, deeper, found, radius):
-        return None
-    compiled = recheck(obs, deeper, found.obs[known], rows[known], found.n_trials, radius)  # one camera
-    if compiled is None:
-        verifier = Verifier(deeper, obs, match_radius_px=radius, max_false_prob=options.max_false_prob,
-                            trials=found.n_trials)
-        refined = verifier.check(found.obs[known], rows[known], n_trials=found.n_trials)
-    else:  # a proof as strong as Verifier.check asks of an answer (a marginal one adds nothing here)
-        ok, m_obs, m_cat, r, prob = compiled
-        strong = ok and prob <= min(options.max_false_prob, Verifier.strong_false_prob)
-        refined = Verified(m_obs, m_cat, r, prob, found.n_trials) if strong else None
-    if refined is None or len(refined.obs) <= len(found.obs):
-        return None
-    return refined
-
-
-def _could_pair_more(obs: Observation, deeper: NavDatabase, found: Verified, radius_px: float) -> bool:
-    """False if no observed star outside ``found`` lies near a star of ``deeper`` under its
-    attitude, so that re-verifying there cannot name more stars (one camera; see
-    :func:`~.check_kernel.could_pair_more`)."""
-    g = field_grid(deeper, obs.cameras[0].diagonal_fov_deg / 2 + NEAR_MARGIN_DEG)  # the recheck's own grid
-    chord = RECHECK_REACH * radius_px * obs.pixel_scale_rad
-    return bool(could_pair_more(obs.vec, found.obs.astype(np.int64), np.array(found.matrix, np.float64), chord,
-                                *g.kernel_args()[:5], star_vec64(deeper), g.columns))
 
 
 def _identify(

@@ -12,9 +12,10 @@ import numpy as np
 
 from .attitude import matrix_from_radec_roll
 from .camera import Camera
+from .deeper import could_pair_more_deeper
 from .methods import get_matcher
 from .navdb.reader import NavDatabase, NavDatabaseSet
-from .pipeline import _ONE_CAMERA, _could_pair_more, _observation, solve, solve_rig
+from .pipeline import _ONE_CAMERA, _observation, solve, solve_rig
 from .plan import RIG_METHOD
 from .sparse_proof import warm_up_screens
 from .star_index import sky_grid, star_tree
@@ -123,9 +124,9 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
         camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
         frame = own_frames(member, camera, n_tries=1)[0]
         warm_up_screens(member, camera, frame)
-        # the deeper recheck's screen (_could_pair_more), which only an answer found past the
+        # the deeper recheck's screen (could_pair_more_deeper), which only an answer found past the
         # first pass reaches (its first use in a request loaded it from numba's cache)
-        _could_pair_more(_observation([(frame, camera, None)], _ONE_CAMERA), member,
+        could_pair_more_deeper(_observation([(frame, camera, None)], _ONE_CAMERA), member,
                          Verified(np.zeros(0, np.int64), np.zeros(0, np.int64), np.eye(3), 1.0, 0), 2.5)
 
 

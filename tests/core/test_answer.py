@@ -46,7 +46,7 @@ def test_compiled_checks_give_the_python_answer(seed000_db: NavDatabase) -> None
 
 
 def test_compiled_recheck_gives_the_verifiers_answer(seed000_db: NavDatabase) -> None:
-    """pipeline._refine's compiled check agrees with Verifier.check: pairs, bound and attitude."""
+    """deeper.refine_deeper's compiled check agrees with Verifier.check: pairs, bound and attitude."""
     config = SimConfig(mag_limit=6.5, centroid_noise_px=1.0, false_stars=3)
     frames = simulate_frames(SEED000_CAMERA, 30, config, rng=4)
     row_of = {int(h): i for i, h in enumerate(np.asarray(seed000_db.stars.hip))}

@@ -9,6 +9,7 @@ import pytest
 
 from service.core import pipeline
 from service.core.answer import recheck
+from service.core.deeper import could_pair_more_deeper
 from service.core.first_pass import deeper_arrays, first_pass
 from service.core.pipeline import SolveOptions, _observation, solve
 from service.core.plan import search_plan
@@ -93,7 +94,7 @@ def test_the_deeper_recheck_is_skipped_only_where_it_could_not_name_more_stars(d
         known = rows >= 0
         ok, m_obs, _, _, _ = recheck(obs, deepest, found.obs[known], rows[known], found.n_trials, radius)
         more = bool(ok) and len(m_obs) > len(found.obs)
-        if pipeline._could_pair_more(obs, deepest, found, radius):
+        if could_pair_more_deeper(obs, deepest, found, radius):
             named_more += more
         else:
             skipped += 1
@@ -155,7 +156,7 @@ def test_the_compiled_choice_among_marginal_answers_is_the_verifiers(default_set
 def test_an_answer_another_method_proved_is_finished_as_the_general_path_does(monkeypatch, default_set_db, preset,
                                                                                 noise, false, method, need) -> None:
     """``settle``: the first pass's compiled finish for answers of the fallbacks (maxangle,
-    pyramid, triangle's 3-4-star proofs) and of a method asked for by name, against ``_refine``
+    pyramid, triangle's 3-4-star proofs) and of a method asked for by name, against ``deeper.refine_deeper``
     and ``finish.solution``; seeds 000 and 002 re-verify against a deeper member, seeds 001 and
     003 have one."""
     p = PRESETS[preset]

@@ -1,0 +1,65 @@
+"""What a one-camera frame's solve sets up before its search, kept per camera object.
+
+Every frame of a camera asks the same things before ``auto``'s first pass: the search plan, the
+camera's refusal, the compiled call's static arguments, the image's corner probes, the packed
+camera rows. Each is cached already, but each cache is keyed by the camera's value, so a frame
+paid five hashes of the camera dataclass and five lookups: ~5 us of a ~50-us clean frame, and
+three times that when the processor's caches were cold (the benchmark alternates with tetra3rs;
+``/work/s20/stamps_cold.py``). A :class:`CameraSetup` holds them all under one lookup by the
+identity of the camera and options objects, as a caller that reuses them (the SDK, ``solve``
+in a loop, ``bench_peers``) passes them; another object of equal value makes its own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .camera import Camera
+from .match import RigArrays
+from .navdb.reader import NavDatabase, NavDatabaseSet
+
+SETUPS_KEPT = 64
+"""Camera setups kept per opened database (cleared when full)."""
+SETUP_SIZES_KEPT = 512
+"""Frame sizes whose packed rows a setup keeps (a frame of another size packs its own)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CameraSetup:
+    """One camera's set-up on one database for one method and options (see the module)."""
+
+    camera: Camera
+    options: Any
+    method: str
+    plan: list[tuple[NavDatabase, list[str]]]
+    deepest: NavDatabase
+    static: tuple[Any, ...]
+    """:func:`~.first_pass.first_pass_kernel`'s arguments after the frame's own."""
+    probes: np.ndarray
+    """The image's centre and corners, body frame (:func:`~.verify.camera_probes`)."""
+    arrays: dict[int, RigArrays] = field(default_factory=dict)
+    """The packed camera rows per frame size (:func:`~.match.rig_arrays`)."""
+
+
+def kept_setup(db: NavDatabase | NavDatabaseSet, camera: Camera, method: str, options: Any) -> CameraSetup | None:
+    """The setup kept for these very objects, or None."""
+    got = db.__dict__.get("_camera_setups", _NONE).get((id(camera), id(options), method))
+    if got is not None and got.camera is camera and got.options is options:
+        return got
+    return None
+
+
+def keep_setup(db: NavDatabase | NavDatabaseSet, setup: CameraSetup) -> None:
+    """Keep ``setup`` on ``db`` (it holds its camera and options, so their ids stay theirs)."""
+    kept = db.__dict__.setdefault("_camera_setups", {})
+    if len(kept) >= SETUPS_KEPT:
+        kept.clear()
+    kept[(id(setup.camera), id(setup.options), setup.method)] = setup
+
+
+_NONE: dict[tuple[int, int, str], CameraSetup] = {}
+
+__all__ = ["SETUPS_KEPT", "SETUP_SIZES_KEPT", "CameraSetup", "keep_setup", "kept_setup"]

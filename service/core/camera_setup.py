@@ -7,7 +7,9 @@ paid five hashes of the camera dataclass and five lookups: ~5 us of a ~50-us cle
 three times that when the processor's caches were cold (the benchmark alternates with tetra3rs;
 ``/work/s20/stamps_cold.py``). A :class:`CameraSetup` holds them all under one lookup by the
 identity of the camera and options objects, as a caller that reuses them (the SDK, ``solve``
-in a loop, ``bench_peers``) passes them; another object of equal value makes its own.
+in a loop, ``bench_peers``) passes them; another object of equal value makes its own. With
+them in hand the first pass runs from the centroids as given
+(:func:`~.first_pass.frame_first_pass_kernel`): a frame it proves builds no observation.
 """
 
 from __future__ import annotations

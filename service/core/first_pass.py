@@ -17,7 +17,10 @@ Python between them run in one (:func:`first_pass_kernel`):
 4. the final fit: Wahba refit if the pairs changed, residuals, RMS and the pooled 1-sigma
    (:func:`~.attitude.estimate`).
 
-Python converts the input (:func:`~service.core.pipeline._observation`) and builds the answer.
+Python converts the input (:func:`~service.core.pipeline._observation`) and builds the answer;
+for a camera whose set-up is kept (:mod:`~service.core.camera_setup`) the call takes the
+centroids as given and sorts them and makes their vectors itself
+(:func:`frame_first_pass_kernel`), so a frame it proves needs no observation at all.
 The journey is one-way: a frame ``quad`` does not prove comes back with the search's own
 result, which the usual path takes up without searching again (``prefetch``), so nothing is
 done twice; so does an answer whose fit's own noise is over 2.5 declared sigma, for the
@@ -36,16 +39,18 @@ from numba import njit
 
 from .answer import FIELD_MARGIN_DEG, answer_kernel, star_mags
 from .attitude import PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
+from .camera import brightest_first
 from .check_kernel import RECHECK_REACH, could_pair_more, recheck_pairs
 from .hidden import hidden_neighbours
 from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
 from .methods.quad_kernel import STATUS_FOUND, STATUS_MARGINAL, pack_search, quad_search
 from .navdb.reader import NavDatabase
-from .solution import answer_columns, star_hips
+from .solution import answer_columns, solution_of, star_hips
 from .star_index import field_grid, star_vec64
 from .trimmed import MIN_PAIRS as TRIM_MIN_PAIRS
 from .trimmed import MIN_SIGMA_PX, SUSPECT_SIGMA, _robust_sigma_px
+from .types import Solution
 from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier, _image_probes, marginal_choice
 
 
@@ -125,9 +130,33 @@ def first_pass(obs: Observation, member: NavDatabase, deepest: NavDatabase, sigm
                                                         k.cams, k.dist, k.rows, k.row_off, obs.index, probes,
                                                         *static)
     if not solved:
-        return FirstPass((ints, floats), False, member, _NO_ROWS, _NO_ROWS, floats[:9].reshape(3, 3), 1.0, _NO_RES,
-                         0.0, (0.0, 0.0, 0.0), int(ints[1]))
+        return unsolved(ints, floats, member)
     return _solved(ints, floats, deepest if used_deep else member)
+
+
+def unsolved(ints: np.ndarray, floats: np.ndarray, member: NavDatabase) -> FirstPass:
+    """The :class:`FirstPass` of a search the call did not prove (its packed result in hand)."""
+    return FirstPass((ints, floats), False, member, _NO_ROWS, _NO_ROWS, floats[:9].reshape(3, 3), 1.0, _NO_RES, 0.0,
+                     (0.0, 0.0, 0.0), int(ints[1]))
+
+
+def solved_solution(ints: np.ndarray, floats: np.ndarray) -> Solution:
+    """The :class:`~.types.Solution` of a proven first pass, straight from the arrays
+    :func:`settle_kernel` packs (what ``solution_of(*fp.columns, ...)`` gives, without the
+    :class:`FirstPass` between)."""
+    n = int(ints[1])
+    prob, rms, sd0, sd1, sd2 = floats[9:14].tolist()
+    return solution_of(ints[2 + 2 * n:], floats[14 + n:], rms, (sd0, sd1, sd2), prob, "quad")
+
+
+@njit(cache=True, nogil=True)
+def frame_first_pass_kernel(xy_in, flux_in, cx, cy, f_px, mounts, cams, dist, rows, row_off, probes, *static):
+    """:func:`first_pass_kernel` on a pinhole camera's centroids as given (px, fluxes): the
+    stars sorted brightest first and turned into unit vectors here
+    (:func:`~.camera.brightest_first`), so a frame the pass proves needs no
+    :class:`~.verify.Observation` (``static``: :func:`_static_args`)."""
+    order, xy, vec, flux = brightest_first(xy_in, flux_in, cx, cy, f_px)
+    return first_pass_kernel(vec, xy, flux, True, mounts, cams, dist, rows, row_off, order, probes, *static)
 
 
 def _solved(ints: np.ndarray, floats: np.ndarray, db: NavDatabase) -> FirstPass:

@@ -2,7 +2,9 @@
 
 Every stage is timed into ``Solution.timings_ms``: ``vectors`` (camera model), ``identify``
 (the methods, verification included), ``attitude`` (final fit and diagnostics), ``total``;
-``detect`` too when the input is an image.
+``detect`` too when the input is an image. A frame the first pass proves from the centroids as
+given (a camera's kept set-up, :mod:`service.core.camera_setup`) makes its vectors inside that
+compiled call: its ``vectors`` is 0 and ``identify`` holds them.
 """
 
 from __future__ import annotations
@@ -22,8 +24,16 @@ from .deeper import refine_deeper
 from .errors import InvalidInputError
 from .fallback_pass import Chain, fallbacks
 from .finish import solution
-from .first_pass import _static_args, first_pass, settle
-from .match import IDENTITY_MOUNTING, frame_rows
+from .first_pass import (
+    FirstPass,
+    _static_args,
+    first_pass,
+    frame_first_pass_kernel,
+    settle,
+    solved_solution,
+    unsolved,
+)
+from .match import IDENTITY_MOUNTING, frame_rows, rig_arrays
 from .methods import SolveContext, get_matcher
 from .methods.quad import MIN_STARS as QUAD_MIN_STARS
 from .methods.quad import QUERY_STARS
@@ -212,14 +222,31 @@ def solve_rig(
         _ensure_warm(db)  # one-off per opened database; not charged to this frame's time limit
     t0 = time.perf_counter()
     mountings = _mountings or [np.eye(3) if m is None else quat_to_matrix(np.asarray(m, float)) for _, _, m in frames]
-    obs = _observation(frames, mountings)
+    fp: FirstPass | None = None
+    arrays = None
     if setup is not None:  # what the first pass asks of the observation, kept with the camera
-        obs.__dict__["_image_probes"] = setup.probes
-        arrays = setup.arrays.get(len(obs))
+        n = len(frames[0][0])
+        arrays = setup.arrays.get(n)
         if arrays is None:
-            arrays = obs.kernel_arrays
+            arrays = rig_arrays((setup.camera,), _ONE_CAMERA, (frame_rows(n)[1],))
             if len(setup.arrays) < SETUP_SIZES_KEPT:
-                setup.arrays[len(obs)] = arrays
+                setup.arrays[n] = arrays
+        if COMPILED_FIRST_PASS and n >= 5:
+            # the first pass from the centroids as given: a frame it proves needs no Observation
+            # (its vectors are made inside the call: ``vectors`` is 0 and ``identify`` holds them)
+            cents, cam = frames[0][0], frames[0][1]
+            solved, _, ints, floats = frame_first_pass_kernel(
+                np.ascontiguousarray(cents.xy, dtype=np.float64), np.ascontiguousarray(cents.flux, dtype=np.float64),
+                float(cam.cx), float(cam.cy), float(cam.f_px), arrays.mounts, arrays.cams, arrays.dist, arrays.rows,
+                arrays.row_off, setup.probes, *setup.static)
+            if solved:
+                t2 = time.perf_counter()
+                timings["vectors"], timings["identify"] = 0.0, (t2 - t0) * 1e3
+                return _stamped(solved_solution(ints, floats), ["quad"], timings, t0, t2)
+            fp = unsolved(ints, floats, plan[0][0])
+    obs = _observation(frames, mountings)
+    if setup is not None:
+        obs.__dict__["_image_probes"] = setup.probes
         obs.__dict__["_kernel_arrays"] = arrays
     t1 = time.perf_counter()
     timings["vectors"] = (t1 - t0) * 1e3
@@ -240,8 +267,9 @@ def solve_rig(
                                 _static_args(plan[0][0], deepest, obs.cameras[0], sigmas[0], options.match_radius_px,
                                              options.max_false_prob), _image_probes(obs))
             keep_setup(db, setup)
-        fp = first_pass(obs, plan[0][0], deepest, sigmas[0], options.match_radius_px, options.max_false_prob,
-                        None if setup is None else setup.static)
+        if fp is None:
+            fp = first_pass(obs, plan[0][0], deepest, sigmas[0], options.match_radius_px, options.max_false_prob,
+                            None if setup is None else setup.static)
         if fp.solved:
             t2 = time.perf_counter()
             timings["identify"] = (t2 - t1) * 1e3

@@ -127,7 +127,7 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
         # the deeper recheck's screen (could_pair_more_deeper), which only an answer found past the
         # first pass reaches (its first use in a request loaded it from numba's cache)
         could_pair_more_deeper(_observation([(frame, camera, None)], _ONE_CAMERA), member,
-                         Verified(np.zeros(0, np.int64), np.zeros(0, np.int64), np.eye(3), 1.0, 0), 2.5)
+                               Verified(np.zeros(0, np.int64), np.zeros(0, np.int64), np.eye(3), 1.0, 0), 2.5)
 
 
 def own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centroids]:

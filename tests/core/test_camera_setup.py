@@ -44,6 +44,11 @@ def test_frames_solved_with_the_kept_setup_answer_as_without(default_set_db, pre
         _same_answer(a, b)
         assert a.methods_tried == b.methods_tried
     assert sum(s.solved for s in kept) >= 15
+    # the kept camera's first pass ran from the centroids as given (frame_first_pass_kernel): its
+    # proofs made no Observation, their vectors counted in identify; the fresh ones' did
+    fused = [s for s in kept if s.solved and s.timings_ms["vectors"] == 0.0]
+    assert len(fused) >= 10 and all(s.methods_tried == ("quad",) for s in fused)
+    assert all(s.timings_ms["vectors"] > 0.0 for s in fresh if s.solved)
 
 
 def test_the_setup_is_per_method_and_options_and_still_refuses_too_few_stars(default_set_db) -> None:

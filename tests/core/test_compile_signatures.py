@@ -20,7 +20,7 @@ import sys
 from ..conftest import ROOT
 
 KERNELS = {
-    "service.core.first_pass": ["first_pass_kernel", "settle_kernel"],
+    "service.core.first_pass": ["first_pass_kernel", "settle_kernel", "frame_first_pass_kernel"],
     "service.core.fallback_pass": ["chain_kernel", "_maxangle_pass"],
     "service.core.methods.quad_kernel": ["quad_search", "_verify"],
     "service.core.check_kernel": ["verify_pairs", "recheck_pairs", "could_pair_more"],
@@ -43,8 +43,10 @@ db = open_database(ensure_default_database(build=False))
 warm_up(db)
 for key in ("seed000", "seed001", "seed002"):
     p = PRESETS[key]
+    options = SolveOptions(centroid_sigma_px=1.0)  # one object: the camera's set-up is kept (camera_setup)
     for f in simulate_frames(p.camera, 15, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0, false_stars=2), rng=4):
-        solve(f.centroids, p.camera, db, options=SolveOptions(centroid_sigma_px=1.0))
+        solve(f.centroids, p.camera, db, options=options)
+        solve(f.centroids, p.camera, db, options=SolveOptions(centroid_sigma_px=1.0))  # another: the general set-up
     solve(random_points(p.camera, 25, 1), p.camera, db)
 out = {{}}
 for module, names in {KERNELS!r}.items():
@@ -65,5 +67,6 @@ def test_the_default_path_compiles_each_kernel_once(default_set_db: object) -> N
         assert len(sigs) <= 1, (name, sigs)
     # called from Python (quad_search no longer is on these frames: since session 18 the
     # fallbacks of a frame of more than QUERY_STARS stars run compiled too, as a small frame's did)
-    for name in ("first_pass_kernel", "settle_kernel", "chain_kernel", "_triangles_of", "search_chunks"):
+    for name in ("first_pass_kernel", "settle_kernel", "chain_kernel", "_triangles_of", "search_chunks",
+                 "frame_first_pass_kernel"):
         assert len(signatures[name]) == 1, (name, signatures[name])

@@ -154,3 +154,15 @@ def test_profile_default_by_stars_smoke(default_set_db, capsys: pytest.CaptureFi
     shares = [float(line.split("|")[2].strip().rstrip("%")) for line in out.splitlines()
               if line.startswith("| ") and line.split("|")[1].strip().isdigit()]
     assert abs(sum(shares) - 100.0) < 1.0  # every frame counted once
+
+
+def test_profile_cold_smoke(default_set_db, capsys: pytest.CaptureFixture[str]) -> None:
+    from bench import profile_cold
+
+    profile_cold.main(["--camera", "seed003", "--frames", "12", "--evict-mb", "4"])
+    out = capsys.readouterr().out
+    rows = {line.split("|")[1].strip(): line for line in out.splitlines() if line.startswith("| ")}
+    assert {"warm", "in turn", "evicted"} <= set(rows)
+    for label in ("warm", "in turn", "evicted"):  # the first pass's call is part of the solve
+        solve_us, kernel_us = (float(rows[label].split("|")[k].split("/")[0]) for k in (2, 3))
+        assert 0 < kernel_us < solve_us

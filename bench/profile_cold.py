@@ -37,7 +37,7 @@ from service.core.presets import PRESETS  # noqa: E402
 from service.core.sim import SimConfig, simulate_frames  # noqa: E402
 from service.core.warmup import warm_up  # noqa: E402
 
-KERNELS = (("pipeline", "frame_first_pass_kernel"), ("first_pass", "first_pass_kernel"))
+KERNELS = ((pipeline, "frame_first_pass_kernel"), (first_pass_mod, "first_pass_kernel"))
 
 
 class _Timed:
@@ -49,8 +49,7 @@ class _Timed:
         self._saved: list[tuple[Any, str, Callable[..., Any]]] = []
 
     def __enter__(self) -> _Timed:
-        for mod_name, name in KERNELS:
-            mod = pipeline if mod_name == "pipeline" else first_pass_mod
+        for mod, name in KERNELS:
             fn = getattr(mod, name)
             self._saved.append((mod, name, fn))
             setattr(mod, name, self._wrap(fn))

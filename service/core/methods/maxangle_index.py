@@ -234,3 +234,124 @@ def query_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_ta
         if full:
             n_out = first
     return rows[:n_out].copy(), which[:n_out].copy()
+
+
+_BOX_MARGIN = 1e-7
+"""Radians by which :func:`box_cells` widens the stored sides' and ``theta``'s ranges: more than
+their float32 rounding (~4e-9 rad at 3.5 deg) and the key's; the records it reads are then
+decided by their stars' own angles."""
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cos_range(a_lo: float, a_hi: float, b_lo: float, b_hi: float, c_lo: float, c_hi: float) -> tuple[float, float]:
+    """Bounds of ``(b^2 + c^2 - a^2) / (2 b c)`` (``cos theta_max``) over a box of sides (all
+    positive), each of its three terms bounded on its own."""
+    lo = b_lo / (2 * c_hi) + c_lo / (2 * b_hi) - a_hi * a_hi / (2 * b_lo * c_lo)
+    hi = b_hi / (2 * c_lo) + c_hi / (2 * b_lo) - a_lo * a_lo / (2 * b_hi * c_hi)
+    return lo, hi
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _pair_angle(u: np.ndarray, v: np.ndarray) -> float:
+    """Angle (rad) between unit vectors as the pair table stores it (``2 asin(chord / 2)``)."""
+    dx, dy, dz = u[0] - v[0], u[1] - v[1], u[2] - v[2]
+    return 2.0 * math.asin(min(max(math.sqrt(dx * dx + dy * dy + dz * dz) / 2.0, 0.0), 1.0))
+
+
+_PERMS = ((0, 1, 2), (1, 2, 0), (2, 0, 1), (0, 2, 1), (2, 1, 0), (1, 0, 2))
+"""The six vertex orders, the even (handedness-keeping) three first."""
+_EVEN = (True, True, True, False, False, False)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _of(j: int, x0: float, x1: float, x2: float) -> float:
+    """``(x0, x1, x2)[j]`` without a tuple indexed at run time."""
+    return x0 if j == 0 else (x1 if j == 1 else x2)
+
+
+@njit(cache=True, nogil=True)
+def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab: np.ndarray, ids: np.ndarray,
+              star_vec: np.ndarray, obs_vec: np.ndarray, s01: float, s02: float, s12: float, w: float,
+              n_cells: int, b_scale: float, d_max: float, xi: float, theta_max: float) -> tuple[bool, np.ndarray]:
+    """Every catalogue triple ``(p0, p1, p2)`` whose pair angles lie within ``w`` of the observed
+    triangle's (``|angle(p0, p1) - s01| <= w``, likewise ``s02``, ``s12``; radians, as the pair
+    table's windows ``[s - w, s + w]`` hold them) with the handedness of ``obs_vec`` (3, 3), read
+    from a ``cells`` table: the join of three pair windows
+    (:meth:`~.triangle.TriangleMatcher.triples`) as a look-up, in another order.
+
+    A triangle whose sides lie within ``w`` of the observed ones has its sorted sides within
+    ``w`` of the sorted observed ones, so the records read are those of the cells covering the
+    sorted ``b +- w``, ``c +- w``, and in each cell the ``theta_max`` range its sides allow
+    (:func:`_cos_range`); each record's stars then decide in every vertex order. Returns
+    ``(False, empty)`` where the table cannot hold every such triple: a side beyond ``d_max``
+    or at most ``xi``, or ``theta_max`` possibly at or past ``theta_max`` (the table's limits)."""
+    none = np.zeros((0, 3), np.int64)
+    sides = sorted([s01, s02, s12])
+    a0, b0, c0 = sides[2], sides[1], sides[0]
+    m = _BOX_MARGIN
+    if a0 + w + m >= d_max or c0 - w - m <= xi:
+        return False, none
+    cos_lo, _ = _cos_range(a0 - w - m, a0 + w + m, b0 - w - m, b0 + w + m, c0 - w - m, c0 + w + m)
+    if cos_lo <= -1.0 or math.acos(cos_lo) >= theta_max:
+        return False, none
+    lo01, hi01, lo02, hi02, lo12, hi12 = s01 - w, s01 + w, s02 - w, s02 + w, s12 - w, s12 + w
+    h_obs = triple_product(obs_vec[0], obs_vec[1], obs_vec[2])
+    width = b_scale / n_cells
+    ib0, ib1 = _cell_range(b0, w + m, b_scale, n_cells)
+    ic0, ic1 = _cell_range(c0, w + m, b_scale, n_cells)
+    out = np.empty((64, 3), np.int64)
+    n = 0
+    for i_b in range(ib0, ib1 + 1):
+        b_lo = max(i_b * width, b0 - w) - m
+        b_hi = min((i_b + 1) * width, b0 + w) + m
+        for i_c in range(ic0, min(ic1, i_b) + 1):
+            cell = i_b * n_cells + i_c
+            lo, hi = cell_start[cell], cell_start[cell + 1]
+            if lo == hi:
+                continue
+            c_lo = max(i_c * width, c0 - w) - m
+            c_hi = min((i_c + 1) * width, c0 + w) + m
+            if c_lo > b_hi or c_lo <= 0.0:
+                continue
+            cl, ch = _cos_range(a0 - w - m, a0 + w + m, b_lo, b_hi, c_lo, c_hi)
+            th_lo = math.acos(min(max(ch, -1.0), 1.0))
+            th_hi = math.acos(min(max(cl, -1.0), 1.0))
+            part = key[lo:hi]
+            start = lo + np.searchsorted(part, cell + (th_lo - THETA_LO) / THETA_SPAN - _EDGE, side="left")
+            end = lo + np.searchsorted(part, cell + (th_hi - THETA_LO) / THETA_SPAN + _EDGE, side="right")
+            for r in range(start, end):
+                b_rec, c_rec = float(b_tab[r]), float(c_tab[r])
+                if abs(b_rec - b0) > w + m or abs(c_rec - c0) > w + m:
+                    continue
+                th_rec = THETA_LO + (key[r] - cell) * THETA_SPAN
+                a_rec = math.sqrt(max(b_rec * b_rec + c_rec * c_rec - 2 * b_rec * c_rec * math.cos(th_rec), 0.0))
+                if abs(a_rec - a0) > w + m:
+                    continue  # the longest side, rebuilt from the record (float32 sides: within ~1e-8)
+                q = (ids[r, 0], ids[r, 1], ids[r, 2])
+                right = triple_product(star_vec[q[0]], star_vec[q[1]], star_vec[q[2]]) > 0
+                # the record's sides by vertex pair: (q0, q1) is opposite q2, so it is c; (q0, q2)
+                # is b; (q1, q2) is a. Within ~1e-8 of the stars' own angles, computed only for the
+                # orders these let through
+                e0 = e1 = e2 = -1.0
+                for k in range(6):
+                    if (right == (h_obs > 0)) != _EVEN[k]:
+                        continue  # an odd order mirrors the triangle
+                    i0, i1, i2 = _PERMS[k]
+                    j01, j02, j12 = i0 + i1 - 1, i0 + i2 - 1, i1 + i2 - 1  # vertex pair (i, j): side i + j - 1
+                    if (abs(_of(j01, c_rec, b_rec, a_rec) - s01) > w + m or abs(_of(j02, c_rec, b_rec, a_rec) - s02)
+                            > w + m or abs(_of(j12, c_rec, b_rec, a_rec) - s12) > w + m):
+                        continue
+                    if e0 < 0.0:
+                        e0 = _pair_angle(star_vec[q[0]], star_vec[q[1]])
+                        e1 = _pair_angle(star_vec[q[0]], star_vec[q[2]])
+                        e2 = _pair_angle(star_vec[q[1]], star_vec[q[2]])
+                    d01, d02, d12 = _of(j01, e0, e1, e2), _of(j02, e0, e1, e2), _of(j12, e0, e1, e2)
+                    if d01 < lo01 or d01 > hi01 or d02 < lo02 or d02 > hi02 or d12 < lo12 or d12 > hi12:
+                        continue
+                    if n == len(out):
+                        grown = np.empty((2 * n, 3), np.int64)
+                        grown[:n] = out
+                        out = grown
+                    out[n, 0], out[n, 1], out[n, 2] = q[i0], q[i1], q[i2]
+                    n += 1
+    return True, out[:n].copy()

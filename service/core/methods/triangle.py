@@ -43,6 +43,7 @@ from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
 from ..sparse_proof import check_unique_triangle
+from ..star_index import star_vec64
 from ..verify import Verified
 from ._pairs import (
     PairLimits,
@@ -54,6 +55,8 @@ from ._pairs import (
     same_handedness,
 )
 from .base import Progress, SolveContext
+from .maxangle import PATTERN_PARAMS, THETA_MAX_USABLE
+from .maxangle_index import box_cells, bucket_starts
 
 MAX_CANDIDATES = 64
 """Triangles matching more catalogue triples than this are skipped as uninformative."""
@@ -136,6 +139,20 @@ class TriangleMatcher:
         self.kv_line = (float(prm.get("kvector_m", 1.0)), float(prm.get("kvector_q", 0.0)))
         self.order = order
         self.sparse = sparse
+        self.box_table = _box_table(db)
+
+    def box_triples(self, v: np.ndarray, w: float) -> np.ndarray:
+        """:meth:`triples` of ``v`` at half-width ``w`` (rad), in some order: the density box. Read
+        from the member's ``maxangle`` table where it holds every such triple (``cells`` layout,
+        all the stars, the box inside its sides' and ``theta_max``'s limits:
+        :func:`~.maxangle_index.box_cells`), else joined from the pair table."""
+        if self.box_table is not None:
+            d = pairwise_angles(v)
+            ok, out = box_cells(*self.box_table[:6], np.ascontiguousarray(v, dtype=np.float64), float(d[0, 1]),
+                                float(d[0, 2]), float(d[1, 2]), float(w), *self.box_table[6:])
+            if ok:
+                return out
+        return self.triples(v, w, pivot_longest=True)
 
     # -- pair windows --------------------------------------------------------------------
     def windows(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -262,13 +279,31 @@ class TriangleMatcher:
         if not worth(min(w_max, max(BOX_START, BOX_MAX) * eps)):
             return None  # not even the widest box this triangle allows
         w = min(BOX_START * eps, w_max)
-        box = self.triples(v, w, pivot_longest=True)
+        box = self.box_triples(v, w)
         if len(box) < BOX_TARGET / 2 and w < w_max:
             w = min(w * (BOX_TARGET / max(len(box), 8)) ** (1 / 3), w_max, BOX_MAX * eps)
             if not worth(w):
                 return None
-            box = self.triples(v, w, pivot_longest=True)
+            box = self.box_triples(v, w)
         return box, w
+
+
+def _box_table(db: NavDatabase) -> tuple[Any, ...] | None:
+    """:func:`~.maxangle_index.box_cells`'s table arguments from ``db``'s ``maxangle`` table, if it
+    can stand in for the pair-window join: the ``cells`` layout, made of every star of ``db``
+    (no pattern-star selection) and of the pairs the join reads (the member's star vectors)."""
+    if "maxangle" not in db.tables:
+        return None
+    prm = db.method_params("maxangle")
+    if prm.get("layout") != "cells" or any(k in prm for k in PATTERN_PARAMS):
+        return None
+    if int(prm.get("n_pattern_stars", -1)) != len(db.stars):
+        return None
+    t = db.tables["maxangle"]
+    n_cells = int(prm["n_cells"])
+    return (t["key"], bucket_starts(np.asarray(t["key"]), n_cells * n_cells), t["b"], t["c"], t["ids"],
+            star_vec64(db), n_cells, float(prm["b_scale"]), math.radians(float(prm["d_max_deg"])),
+            math.radians(float(prm["xi_deg"])), THETA_MAX_USABLE)
 
 
 @functools.lru_cache(maxsize=64)

@@ -203,3 +203,45 @@ def test_triangles_pyramid_joined_in_vain_are_not_joined_again(default_set_db, m
         assert (alone is None) == (after is None)
         skipped += n_alone - n_after
     assert skipped >= 10
+
+
+def test_density_box_read_from_the_maxangle_table_is_the_join(default_set_db) -> None:
+    """The default set's ``sparse`` member holds ``maxangle`` (cells) and ``triangle``: a density
+    box inside the table's limits is read from it (``box_triples``), and holds exactly the triples
+    the pair-window join gives, at every width; beyond the limits the join answers."""
+    from service.core.geometry import pairwise_angles
+    from service.core.methods.maxangle_index import box_cells
+
+    member = default_set_db.members["sparse"]
+    tri = get_matcher(member, "triangle")
+    assert tri.box_table is not None
+    vec = np.asarray(member.stars.vec)
+    rng = np.random.default_rng(7)
+    read, joined, triples = 0, 0, 0
+    while read < 60 or joined < 10:
+        i = int(rng.integers(len(vec)))
+        near = np.flatnonzero(vec @ vec[i] > math.cos(math.radians(4.4)))
+        near = near[near != i]
+        if len(near) < 2:
+            continue
+        v = vec[[i, *rng.choice(near, 2, replace=False)]] + rng.normal(0.0, 2e-5, (3, 3))
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        d = pairwise_angles(v)
+        w = min(float(rng.choice([1e-4, 6e-4, 2e-3])), min(d[0, 1], d[0, 2], d[1, 2]) / 4)
+        got = tri.box_triples(v, w)
+        want = tri.triples(v, w, pivot_longest=True)
+        assert sorted(map(tuple, got.tolist())) == sorted(map(tuple, want.tolist()))
+        ok, _ = box_cells(*tri.box_table[:6], v, float(d[0, 1]), float(d[0, 2]), float(d[1, 2]), w,
+                          *tri.box_table[6:])
+        read += ok
+        joined += not ok
+        triples += len(want) if ok else 0
+    assert triples > 1000  # boxes with triples in them, not only empty ones
+
+
+def test_density_box_joins_without_a_usable_table(db: NavDatabase) -> None:
+    """A database without ``maxangle`` has no box table: the box is the join."""
+    tri = get_matcher(db, "triangle")
+    assert tri.box_table is None
+    v = np.asarray(db.stars.vec)[:3]
+    np.testing.assert_array_equal(tri.box_triples(v, 1e-3), tri.triples(v, 1e-3, pivot_longest=True))

@@ -55,7 +55,7 @@ from ._pairs import (
     same_handedness,
 )
 from .base import Progress, SolveContext
-from .maxangle import PATTERN_PARAMS, THETA_MAX_USABLE
+from .maxangle import PATTERN_PARAMS, THETA_MAX_USABLE, MaxAngle
 from .maxangle_index import box_cells, bucket_starts
 
 MAX_CANDIDATES = 64
@@ -117,6 +117,13 @@ class Triangle:
             k, m, q = build_kvector(angles)
             tables["kvector"] = k
             meta.update(kvector_m=m, kvector_q=q)
+        box_deg = float(params.get("box_d_max_deg", 0.0))
+        if box_deg > 0:  # the density box's own triangle table (maxangle's cells layout, every star)
+            box, box_meta = MaxAngle().build_tables(stars, config, {"d_max_deg": box_deg,
+                                                                    "n_cells": _box_cells(box_deg)}, progress)
+            tables.update({f"box_{name}": box[name] for name in ("key", "ids", "b", "c")})
+            meta.update({f"box_{name}": box_meta[name] for name in ("d_max_deg", "xi_deg", "n_cells", "b_scale",
+                                                                     "n_triangles")})
         progress(f"{len(angles)} pairs", 1.0)
         return tables, meta
 
@@ -143,12 +150,14 @@ class TriangleMatcher:
 
     def box_triples(self, v: np.ndarray, w: float) -> np.ndarray:
         """:meth:`triples` of ``v`` at half-width ``w`` (rad), in some order: the density box. Read
-        from the member's ``maxangle`` table where it holds every such triple (``cells`` layout,
-        all the stars, the box inside its sides' and ``theta_max``'s limits:
-        :func:`~.maxangle_index.box_cells`), else joined from the pair table."""
+        from a triangle table where one holds every such triple (:func:`_box_table`: the method's
+        own, built with ``box_d_max_deg``, or the member's ``maxangle`` table; the box inside its
+        sides' and ``theta_max``'s limits: :func:`~.maxangle_index.box_cells`), else joined from
+        the pair table."""
         if self.box_table is not None:
             d = pairwise_angles(v)
-            ok, out = box_cells(*self.box_table[:6], np.ascontiguousarray(v, dtype=np.float64), float(d[0, 1]),
+            obs_vec = np.array(v, dtype=np.float64)  # a writable copy: one compiled signature
+            ok, out = box_cells(*self.box_table[:6], obs_vec, float(d[0, 1]),
                                 float(d[0, 2]), float(d[1, 2]), float(w), *self.box_table[6:])
             if ok:
                 return out
@@ -288,22 +297,39 @@ class TriangleMatcher:
         return box, w
 
 
+BOX_CELL_DEG = 3.5 / 256
+"""Cell side (deg) of the box table's ``(b, c)`` grid: the default set's ``maxangle`` cells."""
+
+
+def _box_cells(d_max_deg: float) -> int:
+    """Cells per side of a box table reaching ``d_max_deg``: about :data:`BOX_CELL_DEG` wide."""
+    return max(16, round(d_max_deg / BOX_CELL_DEG))
+
+
 def _box_table(db: NavDatabase) -> tuple[Any, ...] | None:
-    """:func:`~.maxangle_index.box_cells`'s table arguments from ``db``'s ``maxangle`` table, if it
-    can stand in for the pair-window join: the ``cells`` layout, made of every star of ``db``
-    (no pattern-star selection) and of the pairs the join reads (the member's star vectors)."""
-    if "maxangle" not in db.tables:
+    """:func:`~.maxangle_index.box_cells`'s table arguments for ``db``'s density boxes: the
+    triangle method's own box table (build parameter ``box_d_max_deg``), else the member's
+    ``maxangle`` table if it can stand in for the pair-window join (the ``cells`` layout, made of
+    every star of ``db``, no pattern-star selection), else None (the join). The one reaching
+    further is taken."""
+    found = []
+    prm = db.method_params("triangle")
+    if "box_key" in db.tables.get("triangle", {}):
+        t = db.tables["triangle"]
+        found.append((float(prm["box_d_max_deg"]), t["box_key"], t["box_b"], t["box_c"], t["box_ids"],
+                      int(prm["box_n_cells"]), float(prm["box_b_scale"]), float(prm["box_xi_deg"])))
+    if "maxangle" in db.tables:
+        mp = db.method_params("maxangle")
+        if (mp.get("layout") == "cells" and not any(k in mp for k in PATTERN_PARAMS)
+                and int(mp.get("n_pattern_stars", -1)) == len(db.stars)):
+            t = db.tables["maxangle"]
+            found.append((float(mp["d_max_deg"]), t["key"], t["b"], t["c"], t["ids"], int(mp["n_cells"]),
+                          float(mp["b_scale"]), float(mp["xi_deg"])))
+    if not found:
         return None
-    prm = db.method_params("maxangle")
-    if prm.get("layout") != "cells" or any(k in prm for k in PATTERN_PARAMS):
-        return None
-    if int(prm.get("n_pattern_stars", -1)) != len(db.stars):
-        return None
-    t = db.tables["maxangle"]
-    n_cells = int(prm["n_cells"])
-    return (t["key"], bucket_starts(np.asarray(t["key"]), n_cells * n_cells), t["b"], t["c"], t["ids"],
-            star_vec64(db), n_cells, float(prm["b_scale"]), math.radians(float(prm["d_max_deg"])),
-            math.radians(float(prm["xi_deg"])), THETA_MAX_USABLE)
+    d_max_deg, key, b, c, ids, n_cells, b_scale, xi_deg = max(found, key=lambda x: x[0])
+    return (key, bucket_starts(np.asarray(key), n_cells * n_cells), b, c, ids, star_vec64(db), n_cells, b_scale,
+            math.radians(d_max_deg), math.radians(xi_deg), THETA_MAX_USABLE)
 
 
 @functools.lru_cache(maxsize=64)

@@ -31,6 +31,7 @@ from ._pairs import (
     require_shared,
     same_handedness,
 )
+from ._table_join import table_join, triangle_table
 from .base import Progress, SolveContext
 
 MAX_CANDIDATES = 1000
@@ -77,6 +78,7 @@ class PyramidMatcher:
         self.vec = db.stars.vec
         self.n_stars = len(db.stars)
         self.max_angle = math.radians(db.method_params("pyramid")["max_angle_deg"])
+        self.table = triangle_table(db)  # the join's triples looked up, where it holds them (_table_join)
 
     def identify(self, ctx: SolveContext) -> Verified | None:
         obs = ctx.obs
@@ -100,10 +102,12 @@ class PyramidMatcher:
             sides = (d[i, j], d[i, k], d[j, k])
             if max(sides) > self.max_angle - tol or min(sides) < 4 * tol:
                 continue
-            cand = join_windows(self.pairs, int(start[i, j]), int(end[i, j]), int(start[i, k]), int(end[i, k]),
-                                int(start[j, k]), int(end[j, k]), self.n_stars)
-            if len(cand):
-                cand = cand[same_handedness(self.vec, v[[i, j, k]], cand)]
+            cand = None if self.table is None else table_join(self.table, v[[i, j, k]], d[i, j], d[i, k], d[j, k], tol)
+            if cand is None:  # no triangle table, or one that may not hold them all: the join
+                cand = join_windows(self.pairs, int(start[i, j]), int(end[i, j]), int(start[i, k]), int(end[i, k]),
+                                    int(start[j, k]), int(end[j, k]), self.n_stars)
+                if len(cand):
+                    cand = cand[same_handedness(self.vec, v[[i, j, k]], cand)]
             if len(cand) == 0:
                 known_empty.add((i, j, k))
                 empty += 1

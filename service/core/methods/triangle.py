@@ -43,7 +43,6 @@ from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
 from ..sparse_proof import check_unique_triangle
-from ..star_index import star_vec64
 from ..verify import Verified
 from ._pairs import (
     PairLimits,
@@ -54,9 +53,8 @@ from ._pairs import (
     require_shared,
     same_handedness,
 )
+from ._table_join import build_box_table, table_join, table_triples, triangle_table
 from .base import Progress, SolveContext
-from .maxangle import PATTERN_PARAMS, THETA_MAX_USABLE, MaxAngle
-from .maxangle_index import box_cells, bucket_starts
 
 MAX_CANDIDATES = 64
 """Triangles matching more catalogue triples than this are skipped as uninformative."""
@@ -118,12 +116,10 @@ class Triangle:
             tables["kvector"] = k
             meta.update(kvector_m=m, kvector_q=q)
         box_deg = float(params.get("box_d_max_deg", 0.0))
-        if box_deg > 0:  # the density box's own triangle table (maxangle's cells layout, every star)
-            box, box_meta = MaxAngle().build_tables(stars, config, {"d_max_deg": box_deg,
-                                                                    "n_cells": _box_cells(box_deg)}, progress)
-            tables.update({f"box_{name}": box[name] for name in ("key", "ids", "b", "c")})
-            meta.update({f"box_{name}": box_meta[name] for name in ("d_max_deg", "xi_deg", "n_cells", "b_scale",
-                                                                     "n_triangles")})
+        if box_deg > 0:  # a table of every triangle to box_deg, read instead of joining (_table_join)
+            box, box_meta = build_box_table(stars, config, box_deg, progress)
+            tables.update(box)
+            meta.update(box_meta)
         progress(f"{len(angles)} pairs", 1.0)
         return tables, meta
 
@@ -146,20 +142,16 @@ class TriangleMatcher:
         self.kv_line = (float(prm.get("kvector_m", 1.0)), float(prm.get("kvector_q", 0.0)))
         self.order = order
         self.sparse = sparse
-        self.box_table = _box_table(db)
+        self.box_table = triangle_table(db)
 
     def box_triples(self, v: np.ndarray, w: float) -> np.ndarray:
-        """:meth:`triples` of ``v`` at half-width ``w`` (rad), in some order: the density box. Read
-        from a triangle table where one holds every such triple (:func:`_box_table`: the method's
-        own, built with ``box_d_max_deg``, or the member's ``maxangle`` table; the box inside its
-        sides' and ``theta_max``'s limits: :func:`~.maxangle_index.box_cells`), else joined from
-        the pair table."""
+        """:meth:`triples` of ``v`` at half-width ``w`` (rad), in some order: the density box,
+        read from the member's triangle table where it holds them all
+        (:func:`~._table_join.table_triples`), else joined."""
         if self.box_table is not None:
             d = pairwise_angles(v)
-            obs_vec = np.array(v, dtype=np.float64)  # a writable copy: one compiled signature
-            ok, out = box_cells(*self.box_table[:6], obs_vec, float(d[0, 1]),
-                                float(d[0, 2]), float(d[1, 2]), float(w), *self.box_table[6:])
-            if ok:
+            out = table_triples(self.box_table, v, d[0, 1], d[0, 2], d[1, 2], w)
+            if out is not None:
                 return out
         return self.triples(v, w, pivot_longest=True)
 
@@ -193,6 +185,12 @@ class TriangleMatcher:
         if pivot_longest and d[p, q] > d[p, r]:
             q, r = r, q  # the outer loop walks the a-b window: the shortest side's, the fewest pairs
         sides = np.array([d[p, q], d[p, r], d[q, r]])
+        if self.box_table is not None and not pivot_longest:  # the join's triples, in its order, looked up
+            got = table_join(self.box_table, v[[p, q, r]], sides[0], sides[1], sides[2], eps)
+            if got is not None:
+                out = np.empty_like(got)
+                out[:, [p, q, r]] = got
+                return out
         s, e = self.windows(sides - eps, sides + eps)
         cand = join_windows(self.pairs, int(s[0]), int(e[0]), int(s[1]), int(e[1]), int(s[2]), int(e[2]),
                             self.n_stars)
@@ -295,41 +293,6 @@ class TriangleMatcher:
                 return None
             box = self.box_triples(v, w)
         return box, w
-
-
-BOX_CELL_DEG = 3.5 / 256
-"""Cell side (deg) of the box table's ``(b, c)`` grid: the default set's ``maxangle`` cells."""
-
-
-def _box_cells(d_max_deg: float) -> int:
-    """Cells per side of a box table reaching ``d_max_deg``: about :data:`BOX_CELL_DEG` wide."""
-    return max(16, round(d_max_deg / BOX_CELL_DEG))
-
-
-def _box_table(db: NavDatabase) -> tuple[Any, ...] | None:
-    """:func:`~.maxangle_index.box_cells`'s table arguments for ``db``'s density boxes: the
-    triangle method's own box table (build parameter ``box_d_max_deg``), else the member's
-    ``maxangle`` table if it can stand in for the pair-window join (the ``cells`` layout, made of
-    every star of ``db``, no pattern-star selection), else None (the join). The one reaching
-    further is taken."""
-    found = []
-    prm = db.method_params("triangle")
-    if "box_key" in db.tables.get("triangle", {}):
-        t = db.tables["triangle"]
-        found.append((float(prm["box_d_max_deg"]), t["box_key"], t["box_b"], t["box_c"], t["box_ids"],
-                      int(prm["box_n_cells"]), float(prm["box_b_scale"]), float(prm["box_xi_deg"])))
-    if "maxangle" in db.tables:
-        mp = db.method_params("maxangle")
-        if (mp.get("layout") == "cells" and not any(k in mp for k in PATTERN_PARAMS)
-                and int(mp.get("n_pattern_stars", -1)) == len(db.stars)):
-            t = db.tables["maxangle"]
-            found.append((float(mp["d_max_deg"]), t["key"], t["b"], t["c"], t["ids"], int(mp["n_cells"]),
-                          float(mp["b_scale"]), float(mp["xi_deg"])))
-    if not found:
-        return None
-    d_max_deg, key, b, c, ids, n_cells, b_scale, xi_deg = max(found, key=lambda x: x[0])
-    return (key, bucket_starts(np.asarray(key), n_cells * n_cells), b, c, ids, star_vec64(db), n_cells, b_scale,
-            math.radians(d_max_deg), math.radians(xi_deg), THETA_MAX_USABLE)
 
 
 @functools.lru_cache(maxsize=64)

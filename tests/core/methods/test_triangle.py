@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from service.core.evaluate import score
 from service.core.methods import get_matcher
 from service.core.methods.triangle import TriangleMatcher, build_kvector, kvector_range
-from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
+from service.core.navdb import NavDatabase, build_database, open_database
 from service.core.pipeline import SolveOptions, solve
 from service.core.sim import SimConfig, simulate_frames
 from tests.conftest import SEED000_CAMERA, seed000_config
@@ -203,61 +203,6 @@ def test_triangles_pyramid_joined_in_vain_are_not_joined_again(default_set_db, m
         assert (alone is None) == (after is None)
         skipped += n_alone - n_after
     assert skipped >= 10
-
-
-def _assert_boxes_are_the_join(member: NavDatabase, max_side_deg: float, min_read: int) -> None:
-    """Random observed triangles of ``member``'s stars (sides up to ``max_side_deg``): each density
-    box from ``box_triples`` holds exactly the join's triples, at three widths; at least
-    ``min_read`` are read from the table and at least 10 are past it (joined)."""
-    from service.core.geometry import pairwise_angles
-    from service.core.methods.maxangle_index import box_cells
-
-    tri = get_matcher(member, "triangle")
-    assert tri.box_table is not None
-    vec = np.asarray(member.stars.vec)
-    rng = np.random.default_rng(7)
-    read, joined, triples = 0, 0, 0
-    while read < min_read or joined < 10:
-        i = int(rng.integers(len(vec)))
-        near = np.flatnonzero(vec @ vec[i] > math.cos(math.radians(max_side_deg)))
-        near = near[near != i]
-        if len(near) < 2:
-            continue
-        v = vec[[i, *rng.choice(near, 2, replace=False)]] + rng.normal(0.0, 2e-5, (3, 3))
-        v /= np.linalg.norm(v, axis=1, keepdims=True)
-        d = pairwise_angles(v)
-        w = min(float(rng.choice([1e-4, 6e-4, 2e-3])), min(d[0, 1], d[0, 2], d[1, 2]) / 4)
-        got = tri.box_triples(v, w)
-        want = tri.triples(v, w, pivot_longest=True)
-        assert sorted(map(tuple, got.tolist())) == sorted(map(tuple, want.tolist()))
-        ok, _ = box_cells(*tri.box_table[:6], v, float(d[0, 1]), float(d[0, 2]), float(d[1, 2]), w,
-                          *tri.box_table[6:])
-        read += ok
-        joined += not ok
-        triples += len(want) if ok else 0
-    assert triples > 10 * min_read  # boxes with triples in them, not only empty ones
-
-
-def test_density_box_read_from_its_own_table_is_the_join(default_set_db) -> None:
-    """The default set's ``sparse`` member: ``triangle``'s own box table (``box_d_max_deg`` 4.5)
-    reaches further than its ``maxangle`` table (3.5 deg) and is the one read; its boxes are the
-    pair-window join's, and past its reach the join answers."""
-    member = default_set_db.members["sparse"]
-    tri = get_matcher(member, "triangle")
-    assert tri.box_table[0] is member.tables["triangle"]["box_key"]
-    assert member.method_params("triangle")["box_d_max_deg"] > member.method_params("maxangle")["d_max_deg"]
-    _assert_boxes_are_the_join(member, 5.5, 60)
-
-
-def test_density_box_read_from_the_maxangle_table_is_the_join(tmp_path) -> None:
-    """Without a box table of its own, ``triangle`` reads a ``maxangle`` table of every star of
-    its member (the ``cells`` layout), with the same boxes as the join."""
-    path = tmp_path / "narrow"
-    build_database(path, BuildConfig(fov_min_deg=3.0, fov_max_deg=4.5, mag_limit=6.5, epoch=2026.0,
-                                     methods=("maxangle", "triangle")))
-    db = open_database(path)
-    assert get_matcher(db, "triangle").box_table[0] is db.tables["maxangle"]["key"]
-    _assert_boxes_are_the_join(db, 4.0, 40)
 
 
 def test_density_box_joins_without_a_usable_table(db: NavDatabase) -> None:

@@ -1,0 +1,103 @@
+"""Pair-window joins read from a triangle table.
+
+``pyramid`` and ``triangle`` find the catalogue triples of an observed triangle by joining three
+windows of the pair table (:func:`~._pairs.join_windows`): every pair within ``w`` of each side,
+~1,000-15,000 rows a window on the default set's ``sparse`` member, ~35-450 us a join. A table of
+every triangle of the member's stars holds the same triples, read by cell
+(:func:`~.maxangle_index.box_cells`, ~10-80 us): the member's ``maxangle`` table when it is made
+of every star (``cells`` layout), or ``triangle``'s own box table (build parameter
+``box_d_max_deg``). Where the triangle could reach past the table's limits the callers join.
+
+:func:`table_join` gives the join's triples in the join's order (by pivot star, then the pivot's
+pair with the second vertex, then with the third, each pair by its place in the pair table:
+orientation, then angle), so that the candidates a caller checks, and the answers, are those of
+the join; the density box (:meth:`~.triangle.TriangleMatcher.box_triples`) takes them in any order.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..navdb.reader import NavDatabase
+from ..star_index import star_vec64
+from .maxangle import PATTERN_PARAMS, THETA_MAX_USABLE, MaxAngle
+from .maxangle_index import box_cells, bucket_starts
+
+BOX_CELL_DEG = 3.5 / 256
+"""Cell side (deg) of a box table's ``(b, c)`` grid: the default set's ``maxangle`` cells."""
+
+TableArgs = tuple[Any, ...]
+""":func:`~.maxangle_index.box_cells`'s table arguments: ``key, cell_start, b, c, ids, star_vec``,
+then ``n_cells, b_scale, d_max, xi, theta_max``."""
+
+
+def build_box_table(stars: Any, config: Any, d_max_deg: float, progress: Any) -> tuple[dict[str, np.ndarray],
+                                                                                    dict[str, Any]]:
+    """``triangle``'s own box table: every triangle of ``stars`` with sides up to ``d_max_deg``
+    (``maxangle``'s builder, cells about :data:`BOX_CELL_DEG` wide), as arrays ``box_*`` and
+    their manifest entries ``box_*``."""
+    n_cells = max(16, round(d_max_deg / BOX_CELL_DEG))
+    box, meta = MaxAngle().build_tables(stars, config, {"d_max_deg": d_max_deg, "n_cells": n_cells}, progress)
+    return ({f"box_{name}": box[name] for name in ("key", "ids", "b", "c")},
+            {f"box_{name}": meta[name] for name in ("d_max_deg", "xi_deg", "n_cells", "b_scale", "n_triangles")})
+
+
+def triangle_table(db: NavDatabase) -> TableArgs | None:
+    """The triangle table of ``db`` that reaches furthest (``triangle``'s own box table, or a
+    ``maxangle`` table in the ``cells`` layout made of every star of ``db``), as
+    :func:`~.maxangle_index.box_cells` takes it; None without one. Kept on ``db``."""
+    cache = db.__dict__.setdefault("_cache", {})
+    if "triangle_table" not in cache:
+        cache["triangle_table"] = _find_table(db)
+    return cache["triangle_table"]
+
+
+def _find_table(db: NavDatabase) -> TableArgs | None:
+    found = []
+    if "box_key" in db.tables.get("triangle", {}):
+        t, prm = db.tables["triangle"], db.method_params("triangle")
+        found.append((float(prm["box_d_max_deg"]), t["box_key"], t["box_b"], t["box_c"], t["box_ids"],
+                      int(prm["box_n_cells"]), float(prm["box_b_scale"]), float(prm["box_xi_deg"])))
+    if "maxangle" in db.tables:
+        t, prm = db.tables["maxangle"], db.method_params("maxangle")
+        if (prm.get("layout") == "cells" and not any(k in prm for k in PATTERN_PARAMS)
+                and int(prm.get("n_pattern_stars", -1)) == len(db.stars)):
+            found.append((float(prm["d_max_deg"]), t["key"], t["b"], t["c"], t["ids"], int(prm["n_cells"]),
+                          float(prm["b_scale"]), float(prm["xi_deg"])))
+    if not found:
+        return None
+    d_max_deg, key, b, c, ids, n_cells, b_scale, xi_deg = max(found, key=lambda x: x[0])
+    return (key, bucket_starts(np.asarray(key), n_cells * n_cells), b, c, ids, star_vec64(db), n_cells, b_scale,
+            math.radians(d_max_deg), math.radians(xi_deg), THETA_MAX_USABLE)
+
+
+def table_triples(table: TableArgs, v: np.ndarray, s_ab: float, s_ac: float, s_bc: float, w: float
+                  ) -> np.ndarray | None:
+    """The triples ``(a, b, c)`` the pair table's windows ``[s - w, s + w]`` of sides ``a-b``,
+    ``a-c``, ``b-c`` join into, with the handedness of ``v`` (3, 3: the observed vectors in that
+    vertex order; radians), in any order; None where the table may not hold them all."""
+    ok, out = box_cells(*table[:6], np.array(v, dtype=np.float64), float(s_ab), float(s_ac), float(s_bc),
+                        float(w), *table[6:])  # (a writable copy of v: one compiled signature)
+    return out if ok else None
+
+
+def table_join(table: TableArgs, v: np.ndarray, s_ab: float, s_ac: float, s_bc: float, w: float
+               ) -> np.ndarray | None:
+    """:func:`table_triples` in the order of :func:`~._pairs.join_windows` (then
+    :func:`~._pairs.same_handedness`) on the same windows: by ``a``, then the ``a-b`` pair's
+    orientation in the pair table (``a`` its smaller row first) and angle, then the ``a-c``
+    pair's (the table's rows are sorted by angle, as the pair table built them)."""
+    out = table_triples(table, v, s_ab, s_ac, s_bc, w)
+    if out is None or len(out) < 2:
+        return out
+    vec = table[5]
+    a, b, c = out[:, 0], out[:, 1], out[:, 2]
+    return out[np.lexsort((_angle(vec, a, c), a > c, _angle(vec, a, b), a > b, a))]
+
+
+def _angle(vec: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Pair angles (rad) as the pair table computed them (:func:`~._pairs.build_pair_table`)."""
+    return 2 * np.arcsin(np.clip(np.linalg.norm(vec[i] - vec[j], axis=1) / 2, 0, 1))

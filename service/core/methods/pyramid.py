@@ -88,9 +88,7 @@ class PyramidMatcher:
         v = obs.vec[:n]
         d = pairwise_angles(v)
         tol = ctx.tol_rad
-        # every pair's window of the pair table at once: rows [start, end) within tolerance
-        start = np.searchsorted(self.angles, d - tol, side="left")
-        end = np.searchsorted(self.angles, d + tol, side="right")
+        windows: tuple[np.ndarray, np.ndarray] | None = None  # each pair's rows [start, end), when first joined
         # a frame of as many stars as a proof pairs: every one must be a catalogue star, so every
         # triangle of them a catalogue triangle (see EMPTY_TRIANGLES_TO_REFUSE)
         all_needed = len(obs) <= ctx.verifier.min_matches
@@ -104,6 +102,10 @@ class PyramidMatcher:
                 continue
             cand = None if self.table is None else table_join(self.table, v[[i, j, k]], d[i, j], d[i, k], d[j, k], tol)
             if cand is None:  # no triangle table, or one that may not hold them all: the join
+                if windows is None:  # every pair's window of the pair table at once
+                    windows = (np.searchsorted(self.angles, d - tol, side="left"),
+                               np.searchsorted(self.angles, d + tol, side="right"))
+                start, end = windows
                 cand = join_windows(self.pairs, int(start[i, j]), int(end[i, j]), int(start[i, k]), int(end[i, k]),
                                     int(start[j, k]), int(end[j, k]), self.n_stars)
                 if len(cand):

@@ -24,6 +24,9 @@ import numpy as np
 from ..navdb.reader import NavDatabase
 from ..star_index import star_vec64
 from .maxangle import PATTERN_PARAMS, THETA_MAX_USABLE, MaxAngle
+
+_THETA_MAX_DEG = math.degrees(THETA_MAX_USABLE)
+"""The ``theta_max`` limit of a table built before its ``theta_max_deg`` was recorded."""
 from .maxangle_index import box_cells, bucket_starts
 
 BOX_CELL_DEG = 3.5 / 256
@@ -40,9 +43,11 @@ def build_box_table(stars: Any, config: Any, d_max_deg: float, progress: Any) ->
     (``maxangle``'s builder, cells about :data:`BOX_CELL_DEG` wide), as arrays ``box_*`` and
     their manifest entries ``box_*``."""
     n_cells = max(16, round(d_max_deg / BOX_CELL_DEG))
-    box, meta = MaxAngle().build_tables(stars, config, {"d_max_deg": d_max_deg, "n_cells": n_cells}, progress)
+    box, meta = MaxAngle().build_tables(stars, config, {"d_max_deg": d_max_deg, "n_cells": n_cells,
+                                                        "theta_max_deg": 180.0}, progress)
     return ({f"box_{name}": box[name] for name in ("key", "ids", "b", "c")},
-            {f"box_{name}": meta[name] for name in ("d_max_deg", "xi_deg", "n_cells", "b_scale", "n_triangles")})
+            {f"box_{name}": meta[name] for name in ("d_max_deg", "xi_deg", "theta_max_deg", "n_cells", "b_scale",
+                                                    "n_triangles")})
 
 
 def triangle_table(db: NavDatabase) -> TableArgs | None:
@@ -60,18 +65,19 @@ def _find_table(db: NavDatabase) -> TableArgs | None:
     if "box_key" in db.tables.get("triangle", {}):
         t, prm = db.tables["triangle"], db.method_params("triangle")
         found.append((float(prm["box_d_max_deg"]), t["box_key"], t["box_b"], t["box_c"], t["box_ids"],
-                      int(prm["box_n_cells"]), float(prm["box_b_scale"]), float(prm["box_xi_deg"])))
+                      int(prm["box_n_cells"]), float(prm["box_b_scale"]), float(prm["box_xi_deg"]),
+                      float(prm.get("box_theta_max_deg", _THETA_MAX_DEG))))
     if "maxangle" in db.tables:
         t, prm = db.tables["maxangle"], db.method_params("maxangle")
         if (prm.get("layout") == "cells" and not any(k in prm for k in PATTERN_PARAMS)
                 and int(prm.get("n_pattern_stars", -1)) == len(db.stars)):
             found.append((float(prm["d_max_deg"]), t["key"], t["b"], t["c"], t["ids"], int(prm["n_cells"]),
-                          float(prm["b_scale"]), float(prm["xi_deg"])))
+                          float(prm["b_scale"]), float(prm["xi_deg"]), float(prm.get("theta_max_deg", _THETA_MAX_DEG))))
     if not found:
         return None
-    d_max_deg, key, b, c, ids, n_cells, b_scale, xi_deg = max(found, key=lambda x: x[0])
+    d_max_deg, key, b, c, ids, n_cells, b_scale, xi_deg, theta_deg = max(found, key=lambda x: x[0])
     return (key, bucket_starts(np.asarray(key), n_cells * n_cells), b, c, ids, star_vec64(db), n_cells, b_scale,
-            math.radians(d_max_deg), math.radians(xi_deg), THETA_MAX_USABLE)
+            math.radians(d_max_deg), math.radians(xi_deg), math.radians(theta_deg))
 
 
 def table_triples(table: TableArgs, v: np.ndarray, s_ab: float, s_ac: float, s_bc: float, w: float

@@ -124,6 +124,9 @@ class MaxAngle:
         map_large_allocations()  # freed chunks go back to the system, not to glibc's heap
         d_max_deg = float(params.get("d_max_deg", config.fov_min_deg))
         xi_deg = float(params.get("xi_deg", 0.05))
+        # triangles at or past theta_limit are not kept (maxangle's search never forms them; a
+        # table read for every triangle, as _table_join's box table, keeps them all: 180)
+        theta_limit = math.radians(float(params.get("theta_max_deg", math.degrees(THETA_MAX_USABLE))))
         n_blocks = int(params.get("n_blocks", N_BLOCKS))
         layout = str(params.get("layout", "cells"))
         n_cells = int(params.get("n_cells", N_CELLS))
@@ -175,7 +178,7 @@ class MaxAngle:
             d_ij, d_ik, d_jk = seg_ang[rows][hit], seg_ang[other][hit], ang_by_key[pos[hit]]
             sides, ids = _sorted_sides(d_jk, d_ik, d_ij, i_[hit], j_[hit], k_[hit])
             theta = triangle_features(sides[:, 0], sides[:, 1], sides[:, 2])
-            keep = theta < THETA_MAX_USABLE
+            keep = theta < theta_limit if theta_limit < math.pi else np.ones(len(theta), bool)
             theta = theta[keep]
             c32 = sides[keep, 2].astype(np.float32)
             parts["ids"].append(rows_kept[ids[keep]].astype(np.int32))
@@ -199,7 +202,8 @@ class MaxAngle:
         key = tables["key"]
         progress(f"{len(key)} triangles", 1.0)
         layout_meta = {"layout": layout, "n_cells": n_cells} if cells else {"layout": layout, "n_blocks": n_blocks}
-        meta = {"d_max_deg": d_max_deg, "xi_deg": xi_deg, **layout_meta, "b_scale": b_scale,
+        meta = {"d_max_deg": d_max_deg, "xi_deg": xi_deg, "theta_max_deg": math.degrees(theta_limit), **layout_meta,
+                "b_scale": b_scale,
                 "n_triangles": int(len(key)), "n_pattern_stars": int(n),
                 **{k: params[k] for k in PATTERN_PARAMS if k in params}}
         return tables, meta

@@ -43,6 +43,8 @@ N_CELLS = 256
 SUB_BUCKETS = 64
 """``paper`` layout: each theta block's ``b`` range is cut into this many buckets for the
 query's slice search."""
+_FRAC_CLIP = 0.999
+"""``cells`` layout: ``theta_max`` is stored as the fraction of its span, clipped here (179.88 deg)."""
 _EDGE = 1e-9
 """Margin (in cells, or in fractions of the theta span) by which a query widens the cells and
 key range it reads, so that a record on a boundary is decided by the exact checks on its stored
@@ -60,7 +62,7 @@ def cell_key(theta: np.ndarray, b: np.ndarray, c: np.ndarray, n_cells: int, b_sc
     ``b`` and ``c`` are the values stored (float32), so the cell agrees with them exactly."""
     ib = np.minimum((np.asarray(b, np.float64) / b_scale * n_cells).astype(np.int64), n_cells - 1)
     ic = np.minimum((np.asarray(c, np.float64) / b_scale * n_cells).astype(np.int64), n_cells - 1)
-    frac = np.clip((theta - THETA_LO) / THETA_SPAN, 0.0, 0.999)  # theta < 175 deg: below 0.96
+    frac = np.clip((theta - THETA_LO) / THETA_SPAN, 0.0, _FRAC_CLIP)  # theta < 175 deg: below 0.96
     return (ib * n_cells + ic) + frac
 
 
@@ -291,9 +293,13 @@ def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab:
     m = _BOX_MARGIN
     if a0 + w + m >= d_max or c0 - w - m <= xi:
         return False, none
-    cos_lo, _ = _cos_range(a0 - w - m, a0 + w + m, b0 - w - m, b0 + w + m, c0 - w - m, c0 + w + m)
-    if cos_lo <= -1.0 or math.acos(cos_lo) >= theta_max:
-        return False, none
+    # theta_max grows with a and falls with b and c wherever a >= b >= c, so no triangle of the
+    # box has a larger one than the box's corner (a + w, b - w, c - w): the table holds them all
+    # if that corner is under its limit
+    a1, b1, c1 = a0 + w + m, b0 - w - m, c0 - w - m
+    cos_lo = (b1 * b1 + c1 * c1 - a1 * a1) / (2 * b1 * c1)
+    if theta_max < math.pi and (cos_lo <= -1.0 or math.acos(cos_lo) >= theta_max):
+        return False, none  # (a table of every theta_max, 180 deg, holds them whatever the box)
     lo01, hi01, lo02, hi02, lo12, hi12 = s01 - w, s01 + w, s02 - w, s02 + w, s12 - w, s12 + w
     h_obs = triple_product(obs_vec[0], obs_vec[1], obs_vec[2])
     width = b_scale / n_cells
@@ -317,16 +323,20 @@ def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab:
             th_lo = math.acos(min(max(ch, -1.0), 1.0))
             th_hi = math.acos(min(max(cl, -1.0), 1.0))
             part = key[lo:hi]
-            start = lo + np.searchsorted(part, cell + (th_lo - THETA_LO) / THETA_SPAN - _EDGE, side="left")
+            f_lo = min((th_lo - THETA_LO) / THETA_SPAN, _FRAC_CLIP)  # (records past the clip are stored at it)
+            start = lo + np.searchsorted(part, cell + f_lo - _EDGE, side="left")
             end = lo + np.searchsorted(part, cell + (th_hi - THETA_LO) / THETA_SPAN + _EDGE, side="right")
             for r in range(start, end):
                 b_rec, c_rec = float(b_tab[r]), float(c_tab[r])
                 if abs(b_rec - b0) > w + m or abs(c_rec - c0) > w + m:
                     continue
-                th_rec = THETA_LO + (key[r] - cell) * THETA_SPAN
+                frac = key[r] - cell
+                th_rec = THETA_LO + frac * THETA_SPAN
                 a_rec = math.sqrt(max(b_rec * b_rec + c_rec * c_rec - 2 * b_rec * c_rec * math.cos(th_rec), 0.0))
-                if abs(a_rec - a0) > w + m:
+                if frac < _FRAC_CLIP and abs(a_rec - a0) > w + m:
                     continue  # the longest side, rebuilt from the record (float32 sides: within ~1e-8)
+                if frac >= _FRAC_CLIP:
+                    a_rec = b_rec + c_rec  # theta past the key's clip (~179.9 deg): a is b + c, near enough
                 q = (ids[r, 0], ids[r, 1], ids[r, 2])
                 right = triple_product(star_vec[q[0]], star_vec[q[1]], star_vec[q[2]]) > 0
                 # the record's sides by vertex pair: (q0, q1) is opposite q2, so it is c; (q0, q2)

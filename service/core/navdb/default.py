@@ -53,12 +53,14 @@ and ~220 MB of the build (docs/benchmarks.md, Batch).
 3-4 stars cannot be proven (its many faint stars make any small pattern ambiguous and any lone
 extra match likely by chance); against V <= 7 it can, with the triangle method's
 unique-triangle proof. The set tries the shallowest fitting member first. Its ``triangle`` keeps
-a table of every triangle up to 4.5 deg (``box_d_max_deg``; 1.4 million, 38 MB, ~3 s of the
-build), from which the proof reads its density boxes instead of joining pair windows: 99% of
-seed 002's boxes fit (its ``maxangle`` table, to 3.5 deg, holds 72%). Measured with
+a table of every triangle up to 4.5 deg (``box_d_max_deg``; 1.46 million, 39 MB, ~3 s of the
+build) from which the proof reads its density boxes, and ``pyramid`` and ``triangle`` their
+candidates, instead of joining pair windows (:mod:`service.core.methods._table_join`): 996 of
+the 1,011 boxes of seed 002's 3-star frames fit in it. Measured with
 ``python -m bench.bench_default_db --frames 300 --camera seed002``: the 4-deg camera's frames
 of 3 stars 0/37 -> 32/37, of 4 stars 1/44 -> 41/44 (a database built for the camera: 33/37,
-44/44); the other paper cameras unchanged. It adds 1.1 s to the build and 29 MB.
+44/44); the other paper cameras unchanged. It adds ~8 s to the build and 108 MB (the triangle
+table 39 MB of them).
 
 ``rig`` serves rigs only (several cameras on one body, ``solve_rig``): ``multifov`` for cameras of
 7 deg side to 13 deg diagonal at V <= 6.5 (the pair table and its index: ~1.5 s of the build and
@@ -89,8 +91,9 @@ databases a user built are left as they are. 2: ``maxangle`` tables in the ``cel
 (:mod:`service.core.methods.maxangle_index`; the same records, read 3-8x faster). 3: the ``rig``
 member (``multifov`` for rigs of 7-13 deg cameras). 4: ``quad`` tables with a spill list
 (:data:`service.core.methods.quad_build.SPILL_OVER`; the same patterns, a third less time a
-look-up on the narrow member). 5: the ``sparse`` member's ``triangle`` holds its density-box
-table (``box_d_max_deg`` 4.5; the same answers, seed 002's frames of 3 stars ~15% faster)."""
+look-up on the narrow member). 5: the ``sparse`` member's ``triangle`` holds a table of
+every triangle to 4.5 deg (``box_d_max_deg``; the same answers, seed 002's frames of 3-4 stars
+~35% faster)."""
 
 
 def _outdated(path: Path) -> str | None:

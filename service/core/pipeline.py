@@ -362,13 +362,15 @@ def _identify(
     hypotheses were tried) without starting another method."""
     radius = options.match_radius_px or max(2.5, 3.0 * sigma)
     tol = (3.0 * math.sqrt(2.0) * sigma + 0.5) * obs.pixel_scale_rad
-    verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob, trials=trials,
-                        deadline=deadline, trial_limit=trial_limit)
-    if len(obs) < verifier.min_matches:  # only a sparse proof can name so few stars (SPARSE_PROOF_METHODS)
+    if len(obs) < Verifier.min_matches:  # only a sparse proof can name so few stars (SPARSE_PROOF_METHODS)
         methods = [name for name in methods if name in SPARSE_PROOF_METHODS]
     elif len(obs) < QUAD_MIN_STARS and len(obs.cameras) == 1:  # quad would return at once
         methods = [name for name in methods if name != "quad"]
-    used = methods[-1] if methods else ""
+    if not methods:
+        return None, "", trials  # (a 3-4-star frame's quad passes: ~3 us each for the Verifier alone)
+    verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob, trials=trials,
+                        deadline=deadline, trial_limit=trial_limit)
+    used = methods[-1]
     for name in methods:
         if name in TRIANGLE_PROOF_METHODS and not verifier.could_prove(3):
             if unprovable is not None:

@@ -132,14 +132,16 @@ class NavDatabaseSet:
         ``fov_max_deg``; deepest (smallest ``fov_max_deg``) first. If none holds it, the one
         whose range is nearest."""
         diag = fov_deg if diagonal_fov_deg is None else diagonal_fov_deg
-
-        def gap(db: NavDatabase) -> float:
-            lo, hi = float(db.manifest["fov_min_deg"]), float(db.manifest["fov_max_deg"])
-            return max(lo - fov_deg, 0.0) + max(diag - hi, 0.0)
-
-        ranked = sorted(self.members.values(), key=lambda m: (gap(m), float(m.manifest["fov_max_deg"])))
-        fitting = [m for m in ranked if gap(m) == 0.0]
-        return fitting or ranked[:1]
+        ranges = self.__dict__.get("_ranges")
+        if ranges is None:  # (member, fov_min_deg, fov_max_deg) by fov_max_deg, kept: every new camera asks
+            ranges = self.__dict__["_ranges"] = sorted(
+                ((m, float(m.manifest["fov_min_deg"]), float(m.manifest["fov_max_deg"]))
+                 for m in self.members.values()), key=lambda r: r[2])
+        fitting = [m for m, lo, hi in ranges if lo <= fov_deg and diag <= hi]
+        if fitting:
+            return fitting
+        gaps = [max(lo - fov_deg, 0.0) + max(diag - hi, 0.0) for _, lo, hi in ranges]
+        return [ranges[gaps.index(min(gaps))][0]]
 
     @property
     def methods(self) -> list[str]:

@@ -24,10 +24,10 @@ import numpy as np
 from ..navdb.reader import NavDatabase
 from ..star_index import star_vec64
 from .maxangle import PATTERN_PARAMS, THETA_MAX_USABLE, MaxAngle
+from .maxangle_index import box_cells, bucket_starts
 
 _THETA_MAX_DEG = math.degrees(THETA_MAX_USABLE)
 """The ``theta_max`` limit of a table built before its ``theta_max_deg`` was recorded."""
-from .maxangle_index import box_cells, bucket_starts
 
 BOX_CELL_DEG = 3.5 / 256
 """Cell side (deg) of a box table's ``(b, c)`` grid: the default set's ``maxangle`` cells."""

@@ -330,13 +330,14 @@ def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab:
                 b_rec, c_rec = float(b_tab[r]), float(c_tab[r])
                 if abs(b_rec - b0) > w + m or abs(c_rec - c0) > w + m:
                     continue
-                frac = key[r] - cell
-                th_rec = THETA_LO + frac * THETA_SPAN
+                # the longest side, rebuilt from the record (float32 sides: within ~1e-8), except
+                # past the key's clip (~179.9 deg), where the stored theta is not the record's:
+                # there the stars' own angles decide every order (clipped)
+                clipped = key[r] - cell >= _FRAC_CLIP
+                th_rec = THETA_LO + (key[r] - cell) * THETA_SPAN
                 a_rec = math.sqrt(max(b_rec * b_rec + c_rec * c_rec - 2 * b_rec * c_rec * math.cos(th_rec), 0.0))
-                if frac < _FRAC_CLIP and abs(a_rec - a0) > w + m:
-                    continue  # the longest side, rebuilt from the record (float32 sides: within ~1e-8)
-                if frac >= _FRAC_CLIP:
-                    a_rec = b_rec + c_rec  # theta past the key's clip (~179.9 deg): a is b + c, near enough
+                if not clipped and abs(a_rec - a0) > w + m:
+                    continue
                 q = (ids[r, 0], ids[r, 1], ids[r, 2])
                 right = triple_product(star_vec[q[0]], star_vec[q[1]], star_vec[q[2]]) > 0
                 # the record's sides by vertex pair: (q0, q1) is opposite q2, so it is c; (q0, q2)
@@ -348,8 +349,9 @@ def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab:
                         continue  # an odd order mirrors the triangle
                     i0, i1, i2 = _PERMS[k]
                     j01, j02, j12 = i0 + i1 - 1, i0 + i2 - 1, i1 + i2 - 1  # vertex pair (i, j): side i + j - 1
-                    if (abs(_of(j01, c_rec, b_rec, a_rec) - s01) > w + m or abs(_of(j02, c_rec, b_rec, a_rec) - s02)
-                            > w + m or abs(_of(j12, c_rec, b_rec, a_rec) - s12) > w + m):
+                    if not clipped and (abs(_of(j01, c_rec, b_rec, a_rec) - s01) > w + m
+                                        or abs(_of(j02, c_rec, b_rec, a_rec) - s02) > w + m
+                                        or abs(_of(j12, c_rec, b_rec, a_rec) - s12) > w + m):
                         continue
                     if e0 < 0.0:
                         e0 = _pair_angle(star_vec[q[0]], star_vec[q[1]])

@@ -367,7 +367,7 @@ def _identify(
     elif len(obs) < QUAD_MIN_STARS and len(obs.cameras) == 1:  # quad would return at once
         methods = [name for name in methods if name != "quad"]
     if not methods:
-        return None, "", trials  # (a 3-4-star frame's quad passes: ~3 us each for the Verifier alone)
+        return None, "", trials  # (a 3-4-star frame's quad passes: ~5 us each for the Verifier alone)
     verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob, trials=trials,
                         deadline=deadline, trial_limit=trial_limit)
     used = methods[-1]

@@ -124,7 +124,7 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
         camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
         frame = own_frames(member, camera, n_tries=1)[0]
         warm_up_screens(member, camera, frame)
-        if "triangle" in member.methods:  # the density box read from the maxangle table (box_cells)
+        if "triangle" in member.methods:  # its density box read from a triangle table (box_cells)
             get_matcher(member, "triangle").box_triples(np.asarray(member.stars.vec[:3], np.float64), 1e-4)
         # the deeper recheck's screen (could_pair_more_deeper), which only an answer found past the
         # first pass reaches (its first use in a request loaded it from numba's cache)

@@ -45,6 +45,8 @@ def _joined(member, v: np.ndarray, w: float) -> np.ndarray:
 
 @pytest.mark.parametrize(("name", "reach_deg"), [("sparse", 4.3), ("narrow", 3.3)])
 def test_table_join_gives_the_join_in_its_order(default_set_db, name: str, reach_deg: float) -> None:
+    """Observed triangles at pattern tolerances and wider: the table's triples are the join's,
+    in the join's order, pivot stars met in both orientations of their pairs included."""
     member = default_set_db.members[name]
     table = triangle_table(member)
     assert table is not None

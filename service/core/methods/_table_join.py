@@ -61,23 +61,32 @@ def triangle_table(db: NavDatabase) -> TableArgs | None:
 
 
 def _find_table(db: NavDatabase) -> TableArgs | None:
-    found = []
+    from . import get_matcher  # (the registry imports the methods that import this module)
+
+    reach = {}  # the tables db holds that can stand in for the join, by their sides' reach (deg)
     if "box_key" in db.tables.get("triangle", {}):
-        t, prm = db.tables["triangle"], db.method_params("triangle")
-        found.append((float(prm["box_d_max_deg"]), t["box_key"], t["box_b"], t["box_c"], t["box_ids"],
-                      int(prm["box_n_cells"]), float(prm["box_b_scale"]), float(prm["box_xi_deg"]),
-                      float(prm.get("box_theta_max_deg", _THETA_MAX_DEG))))
+        reach["triangle"] = float(db.method_params("triangle")["box_d_max_deg"])
     if "maxangle" in db.tables:
-        t, prm = db.tables["maxangle"], db.method_params("maxangle")
+        prm = db.method_params("maxangle")
         if (prm.get("layout") == "cells" and not any(k in prm for k in PATTERN_PARAMS)
                 and int(prm.get("n_pattern_stars", -1)) == len(db.stars)):
-            found.append((float(prm["d_max_deg"]), t["key"], t["b"], t["c"], t["ids"], int(prm["n_cells"]),
-                          float(prm["b_scale"]), float(prm["xi_deg"]), float(prm.get("theta_max_deg", _THETA_MAX_DEG))))
-    if not found:
+            reach["maxangle"] = float(prm["d_max_deg"])
+    if not reach:
         return None
-    d_max_deg, key, b, c, ids, n_cells, b_scale, xi_deg, theta_deg = max(found, key=lambda x: x[0])
-    return (key, bucket_starts(np.asarray(key), n_cells * n_cells), b, c, ids, star_vec64(db), n_cells, b_scale,
-            math.radians(d_max_deg), math.radians(xi_deg), math.radians(theta_deg))
+    name = max(reach, key=reach.__getitem__)
+    t, prm = db.tables[name], db.method_params(name)
+    if name == "triangle":
+        n_cells = int(prm["box_n_cells"])
+        key, b, c, ids = t["box_key"], t["box_b"], t["box_c"], t["box_ids"]
+        cell_start = bucket_starts(np.asarray(key), n_cells * n_cells)
+        b_scale, xi_deg, theta_deg = prm["box_b_scale"], prm["box_xi_deg"], prm.get("box_theta_max_deg", _THETA_MAX_DEG)
+    else:  # its cell starts are its matcher's own
+        n_cells = int(prm["n_cells"])
+        key, b, c, ids = t["key"], t["b"], t["c"], t["ids"]
+        cell_start = get_matcher(db, "maxangle").bucket_start
+        b_scale, xi_deg, theta_deg = prm["b_scale"], prm["xi_deg"], prm.get("theta_max_deg", _THETA_MAX_DEG)
+    return (key, cell_start, b, c, ids, star_vec64(db), n_cells, float(b_scale), math.radians(reach[name]),
+            math.radians(float(xi_deg)), math.radians(float(theta_deg)))
 
 
 def table_triples(table: TableArgs, v: np.ndarray, s_ab: float, s_ac: float, s_bc: float, w: float

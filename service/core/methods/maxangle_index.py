@@ -29,6 +29,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ..prefetch import prefetch
 from ..screen import triple_product
 
 THETA_LO = math.pi / 3
@@ -174,6 +175,26 @@ def _cell_range(v: float, eps: float, b_scale: float, n_cells: int) -> tuple[int
     return lo, hi
 
 
+PREFETCH_CAP_LINES = 16
+"""Cache lines of one array a look-up requests ahead for one cell (a cell of the 12.5-deg table
+holds ~200 records: 25 lines of keys; most cells of the 3.5-deg ones fit in 1-5)."""
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _prefetch_span(arr: np.ndarray, lo: int, hi: int, per_line: int) -> None:
+    """Request the cache lines of ``arr[lo:hi]`` (1-d; ``per_line`` items a line), at most
+    :data:`PREFETCH_CAP_LINES` of them from ``lo``."""
+    if hi <= lo:
+        return
+    i, n = lo, 0
+    while i < hi and n < PREFETCH_CAP_LINES:
+        prefetch(arr, np.int64(i))
+        i += per_line
+        n += 1
+    if n < PREFETCH_CAP_LINES:
+        prefetch(arr, np.int64(hi - 1))
+
+
 @njit(cache=True, nogil=True)
 def query_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab: np.ndarray, ids: np.ndarray,
                 star_vec: np.ndarray, obs_vec: np.ndarray, labels: np.ndarray, sides: np.ndarray,
@@ -182,57 +203,97 @@ def query_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_ta
     """``cells`` layout query: the ``(b, c)`` cells covering ``b +- eps``, ``c +- eps`` (``c <=
     b``), the ``theta +- tol`` slice of each by binary search, then the exact ``b``, ``c``,
     ``theta``, ``a`` and handedness checks. Returns what :func:`query_paper` returns on the
-    same records."""
+    same records.
+
+    The table is far larger than the caches, and each cell's reads depend on the one before
+    (its start, the binary search, the slice's sides and stars), so the cells of every triangle
+    are first gone through three times, each pass requesting what the next will read: the cells'
+    starts, then their keys, then (after the binary search) the slices' sides and stars. Their
+    misses then overlap instead of following one another; the records read, and the answer,
+    are the same."""
     n_tri = len(theta)
+    n_cell_q = 0  # (triangle, cell) pairs, in the order the scan takes them
     cap = 0
     for t in range(n_tri):
+        ib0, ib1 = _cell_range(sides[t, 1], eps, b_scale, n_cells)
+        ic0, ic1 = _cell_range(sides[t, 2], eps, b_scale, n_cells)
+        for i_b in range(ib0, ib1 + 1):
+            top = min(ic1, i_b)
+            if top < ic0:
+                continue
+            prefetch(cell_start, np.int64(i_b * n_cells + ic0))
+            prefetch(cell_start, np.int64(i_b * n_cells + top + 1))
+            n_cell_q += top - ic0 + 1
         if max_per_triangle > 0:
             cap += max_per_triangle + 1
-        else:
-            ib0, ib1 = _cell_range(sides[t, 1], eps, b_scale, n_cells)
-            ic0, ic1 = _cell_range(sides[t, 2], eps, b_scale, n_cells)
-            for i_b in range(ib0, ib1 + 1):
-                for i_c in range(ic0, min(ic1, i_b) + 1):
-                    cell = i_b * n_cells + i_c
-                    cap += cell_start[cell + 1] - cell_start[cell]
-    rows = np.empty(cap, np.int64)
-    which = np.empty(cap, np.int64)
-    n_out = 0
-    for t in range(n_tri):
-        first = n_out
-        a_obs, b_obs, c_obs = sides[t, 0], sides[t, 1], sides[t, 2]
-        th, tl = theta[t], tol[t]
-        f_lo = (th - tl - THETA_LO) / THETA_SPAN - _EDGE
-        f_hi = (th + tl - THETA_LO) / THETA_SPAN + _EDGE
-        h_obs = triple_product(obs_vec[labels[t, 0]], obs_vec[labels[t, 1]], obs_vec[labels[t, 2]])
-        ib0, ib1 = _cell_range(b_obs, eps, b_scale, n_cells)
-        ic0, ic1 = _cell_range(c_obs, eps, b_scale, n_cells)
-        full = False
+    q_cell = np.empty(n_cell_q, np.int64)
+    q_start = np.empty(n_cell_q, np.int64)
+    q_end = np.empty(n_cell_q, np.int64)
+    q = 0
+    for t in range(n_tri):  # the cells' keys requested
+        ib0, ib1 = _cell_range(sides[t, 1], eps, b_scale, n_cells)
+        ic0, ic1 = _cell_range(sides[t, 2], eps, b_scale, n_cells)
         for i_b in range(ib0, ib1 + 1):
             for i_c in range(ic0, min(ic1, i_b) + 1):
                 cell = i_b * n_cells + i_c
                 lo, hi = cell_start[cell], cell_start[cell + 1]
-                if lo == hi:
+                q_cell[q], q_start[q], q_end[q] = cell, lo, hi
+                _prefetch_span(key, lo, hi, 8)
+                q += 1
+    ids_flat = ids.reshape(-1)
+    q = 0
+    for t in range(n_tri):  # the theta slices found, their sides and stars requested
+        th, tl = theta[t], tol[t]
+        f_lo = (th - tl - THETA_LO) / THETA_SPAN - _EDGE
+        f_hi = (th + tl - THETA_LO) / THETA_SPAN + _EDGE
+        ib0, ib1 = _cell_range(sides[t, 1], eps, b_scale, n_cells)
+        ic0, ic1 = _cell_range(sides[t, 2], eps, b_scale, n_cells)
+        for i_b in range(ib0, ib1 + 1):
+            for i_c in range(ic0, min(ic1, i_b) + 1):
+                cell, lo, hi = q_cell[q], q_start[q], q_end[q]
+                if lo < hi:
+                    part = key[lo:hi]
+                    start = lo + np.searchsorted(part, cell + f_lo, side="left")
+                    end = lo + np.searchsorted(part, cell + f_hi, side="right")
+                    q_start[q], q_end[q] = start, end
+                    _prefetch_span(b_tab, start, end, 16)
+                    _prefetch_span(c_tab, start, end, 16)
+                    _prefetch_span(ids_flat, 3 * start, 3 * end, 8)
+                    if max_per_triangle <= 0:
+                        cap += max(end - start, 0)
+                q += 1
+    rows = np.empty(cap, np.int64)
+    which = np.empty(cap, np.int64)
+    n_out = 0
+    q = 0
+    for t in range(n_tri):
+        first = n_out
+        a_obs, b_obs, c_obs = sides[t, 0], sides[t, 1], sides[t, 2]
+        th, tl = theta[t], tol[t]
+        h_obs = triple_product(obs_vec[labels[t, 0]], obs_vec[labels[t, 1]], obs_vec[labels[t, 2]])
+        ib0, ib1 = _cell_range(b_obs, eps, b_scale, n_cells)
+        ic0, ic1 = _cell_range(c_obs, eps, b_scale, n_cells)
+        n_q = 0
+        for i_b in range(ib0, ib1 + 1):
+            n_q += max(min(ic1, i_b) - ic0 + 1, 0)
+        full = False
+        for qi in range(q, q + n_q):
+            cell = q_cell[qi]
+            for r in range(q_start[qi], q_end[qi]):
+                if abs(b_tab[r] - b_obs) > eps or abs(c_tab[r] - c_obs) > eps:
                     continue
-                part = key[lo:hi]
-                start = lo + np.searchsorted(part, cell + f_lo, side="left")
-                end = lo + np.searchsorted(part, cell + f_hi, side="right")
-                for r in range(start, end):
-                    if abs(b_tab[r] - b_obs) > eps or abs(c_tab[r] - c_obs) > eps:
-                        continue
-                    th_rec = THETA_LO + (key[r] - cell) * THETA_SPAN
-                    if abs(th_rec - th) > tl:
-                        continue
-                    if not _accept(a_obs, float(b_tab[r]), float(c_tab[r]), th_rec, eps, h_obs, star_vec,
-                                   ids[r, 0], ids[r, 1], ids[r, 2]):
-                        continue
-                    n_out, full = _emit(rows, which, n_out, r, t, first, max_per_triangle)
-                    if full:
-                        break
+                th_rec = THETA_LO + (key[r] - cell) * THETA_SPAN
+                if abs(th_rec - th) > tl:
+                    continue
+                if not _accept(a_obs, float(b_tab[r]), float(c_tab[r]), th_rec, eps, h_obs, star_vec,
+                               ids[r, 0], ids[r, 1], ids[r, 2]):
+                    continue
+                n_out, full = _emit(rows, which, n_out, r, t, first, max_per_triangle)
                 if full:
                     break
             if full:
                 break
+        q += n_q
         if full:
             n_out = first
     return rows[:n_out].copy(), which[:n_out].copy()

@@ -125,22 +125,28 @@ def _star_within(px: float, py: float, pz: float, chord: float, cell: float, n_s
                     row = stars[s]
                     if row == skip0 or row == skip1 or row == skip2:
                         continue
-                    dx = vec[row, 0] - px
-                    dy = vec[row, 1] - py
-                    dz = vec[row, 2] - pz
-                    if dx * dx + dy * dy + dz * dz > r2:
-                        continue
-                    alone = True
-                    for j in range(len(away)):
-                        ex = vec[row, 0] - away[j, 0]
-                        ey = vec[row, 1] - away[j, 1]
-                        ez = vec[row, 2] - away[j, 2]
-                        if ex * ex + ey * ey + ez * ez <= a2:
-                            alone = False
-                            break
-                    if alone:
+                    if star_qualifies(vec, row, px, py, pz, r2, away, a2):
                         return True
     return False
+
+
+@njit(cache=True, nogil=True, inline="always")
+def star_qualifies(vec: np.ndarray, row: int, px: float, py: float, pz: float, r2: float, away: np.ndarray,
+                   a2: float) -> bool:
+    """Is star ``row`` within ``sqrt(r2)`` of ``(px, py, pz)`` and farther than ``sqrt(a2)`` from
+    every point of ``away`` ``(M, 3)``? (The test of :func:`_star_within`'s scan, star by star.)"""
+    dx = vec[row, 0] - px
+    dy = vec[row, 1] - py
+    dz = vec[row, 2] - pz
+    if dx * dx + dy * dy + dz * dz > r2:
+        return False
+    for j in range(len(away)):
+        ex = vec[row, 0] - away[j, 0]
+        ey = vec[row, 1] - away[j, 1]
+        ez = vec[row, 2] - away[j, 2]
+        if ex * ex + ey * ey + ez * ez <= a2:
+            return False
+    return True
 
 
 def stars_within(grid: SkyGrid, points: FloatArray, chord: float) -> np.ndarray:

@@ -3,7 +3,8 @@
 Every kernel that asks "which catalogue stars lie near this direction?" reads one of these: a
 k-d tree (:func:`star_tree`), the sky grid of the screens (:func:`sky_grid`), the grids that
 gather a field (:func:`field_grid`), the masks that prove a spot of sky empty
-(:func:`sky_mask`), and the star vectors as the kernels take them (:func:`star_vec64`). Each is
+(:func:`sky_mask`), each star's nearest neighbours (:func:`star_neighbours`), and the star
+vectors as the kernels take them (:func:`star_vec64`). Each is
 built once per opened database (a ``NavDatabase`` or a member of a set) and kept in its
 ``__dict__``; the frames of every camera share them.
 """
@@ -92,3 +93,30 @@ def star_vec64(db: NavDatabase) -> np.ndarray:
         vec.flags.writeable = False  # as the memory map's own: one compiled signature for both
         cache["vec64"] = vec
     return cache["vec64"]
+
+
+NEIGHBOURS = 4
+"""Neighbours :func:`star_neighbours` keeps per star."""
+
+
+def star_neighbours(db: NavDatabase) -> np.ndarray:
+    """Each star's :data:`NEIGHBOURS` nearest other stars, nearest first: rows ``(N, NEIGHBOURS)``
+    int32 (-1 where the database holds fewer), built once per opened database (~20 ms for 25,000
+    stars)."""
+    cache = db.__dict__.setdefault("_cache", {})
+    got = cache.get("neighbours")
+    if got is None:
+        n = len(db.stars.vec)
+        got = np.full((n, NEIGHBOURS), -1, np.int32)
+        k = min(NEIGHBOURS + 1, n)
+        if k > 1:
+            _, idx = star_tree(db).query(np.asarray(db.stars.vec), k=k)
+            own = idx == np.arange(n)[:, None]  # each star's own row, first unless a duplicate ties it
+            once = own.sum(axis=1) == 1
+            got[once, :k - 1] = idx[once][~own[once]].reshape(-1, k - 1)
+            for i in np.flatnonzero(~once):  # (duplicated stars: the own row may be missing)
+                others = [int(j) for j in idx[i] if j != i and j < n][:NEIGHBOURS]
+                got[i, :len(others)] = others
+        got.flags.writeable = False
+        cache["neighbours"] = got
+    return got

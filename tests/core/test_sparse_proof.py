@@ -146,3 +146,110 @@ def test_a_star_in_view_is_one_the_field_check_counts_unseen(seed000_db: NavData
         marked += int(in_view.sum())
         total += len(box)
     assert marked > 0.8 * total
+
+
+def test_sparse_attitudes_are_the_triad_rotations_to_the_bit(seed000_db: NavDatabase) -> None:
+    """The compiled TRIAD rotations equal the numpy formula they replaced, to the bit (the proofs'
+    counts then cannot move), and map each triple's first star onto the first observed one."""
+    from service.core.geometry import cross
+    from service.core.sparse_proof import _sparse_attitudes
+    from service.core.star_index import star_vec64
+
+    def frames(a, b):
+        t1 = a / np.linalg.norm(a, axis=-1, keepdims=True)
+        t2 = cross(a, b)
+        t2 /= np.linalg.norm(t2, axis=-1, keepdims=True)
+        return np.stack([t1, t2, cross(t1, t2)], axis=-1)
+
+    rng = np.random.default_rng(11)
+    stars = star_vec64(seed000_db)
+    obs = rng.normal(size=(3, 3))
+    obs /= np.linalg.norm(obs, axis=1, keepdims=True)
+    box = rng.integers(0, len(stars), (2000, 3))
+    got = _sparse_attitudes(obs, stars, box)
+    want = np.einsum("ij,kmj->kim", frames(obs[0][None], obs[1][None])[0], frames(stars[box[:, 0]], stars[box[:, 1]]))
+    assert np.array_equal(got, want)
+    np.testing.assert_allclose(np.einsum("kij,kj->ki", got, stars[box[:, 0]]), np.broadcast_to(obs[0], (2000, 3)),
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize("extra", [0, 1, 2])
+def test_box_screens_short_cuts_change_no_count(seed000_db: NavDatabase, extra: int) -> None:
+    """``_box_kernel``'s short cuts (the triple's stars' neighbours tested first, the sky mask's
+    clear bits) give the counts of the plain scan: the in-view test (with ``extra`` other observed
+    stars to stay away from, some placed on a neighbour of the triple's stars) and the explain test,
+    on the true triple, triples of its neighbours and random ones."""
+    from service.core.sparse_proof import _box_kernel
+    from service.core.star_index import field_grid, sky_grid, sky_mask, star_neighbours, star_vec64
+
+    frames = simulate_frames(SEED000_CAMERA, 6, SimConfig(mag_limit=6.5, centroid_noise_px=0.5), rng=12)
+    rng = np.random.default_rng(13)
+    hip_rows = {int(h): i for i, h in enumerate(np.asarray(seed000_db.stars.hip))}
+    stars = star_vec64(seed000_db)
+    nb = star_neighbours(seed000_db)
+    no_nb = np.zeros((0, 1), np.int32)
+    no_nb.flags.writeable = False
+    none_mask = np.zeros(1, np.uint64)
+    grid, fg = sky_grid(seed000_db), field_grid(seed000_db, 2.0, any_star=True)
+    found = {"in_view": 0, "explained": 0}
+    for frame in frames:
+        truth = quat_to_matrix(np.asarray(frame.quaternion))  # ICRS -> camera (= body)
+        real = [i for i in np.argsort(-frame.centroids.flux) if frame.hip[i] >= 0 and int(frame.hip[i]) in hip_rows]
+        true = np.array([hip_rows[int(frame.hip[i])] for i in real[:3]])
+        tri_vec = np.ascontiguousarray(stars[true] @ truth.T)
+        near = np.array([[nb[t][rng.integers(0, 4)] if rng.random() < 0.5 else t for t in true] for _ in range(60)])
+        box = np.concatenate([true[None], near, rng.integers(0, len(stars), (300, 3))]).astype(np.int64)
+        box = box[[len(set(t)) == 3 for t in box.tolist()]]
+        # stars to stay away from: the neighbours of the triple's stars where the true attitude puts them
+        away = np.ascontiguousarray(stars[nb[true[:extra], 0]] @ truth.T) if extra else np.zeros((0, 3))
+        bore = np.array([[0.0, 0.0, 1.0]])
+        args = (tri_vec, bore, away, box, 2 * math.sin(math.radians(2.0) / 2), 2 * math.sin(math.radians(0.05) / 2),
+                fg.cell, fg.n_side, fg.keys, fg.starts, fg.stars, fg.vec, fg.columns)
+        plain = _box_kernel(*args, 0, none_mask, no_nb)
+        np.testing.assert_array_equal(_box_kernel(*args, 0, none_mask, nb), plain)
+        found["in_view"] += int(np.count_nonzero(plain))
+        others = np.ascontiguousarray(stars[[hip_rows[int(frame.hip[i])] for i in real[3:8]]] @ truth.T)
+        chord = 1e-4
+        mask = sky_mask(seed000_db, chord)
+        args = (tri_vec, others, np.zeros((0, 3)), box, chord, 0.0, grid.cell, grid.n_side, grid.keys, grid.starts,
+                grid.stars, grid.vec, grid.columns)
+        plain = _box_kernel(*args, 0, none_mask, no_nb)
+        np.testing.assert_array_equal(_box_kernel(*args, mask.n, mask.words, no_nb), plain)
+        found["explained"] += int(plain[0])
+    assert found["in_view"] > 0 and found["explained"] > 0
+
+
+def test_box_screens_neighbour_short_cut_keeps_the_scans_exclusions(seed000_db: NavDatabase) -> None:
+    """Crafted in-view tests where the only star near the point is a neighbour the scan must not
+    count: one of the triple's own stars, or one next to a star to stay away from. The short cut
+    must answer as the scan does (0), and count the neighbour where nothing excludes it (1)."""
+    from service.core.sparse_proof import _box_kernel
+    from service.core.star_index import field_grid, star_neighbours, star_vec64
+
+    stars = star_vec64(seed000_db)
+    nb = star_neighbours(seed000_db)
+    none_mask = np.zeros(1, np.uint64)
+    fg = field_grid(seed000_db, 2.0, any_star=True)
+    rng = np.random.default_rng(14)
+    counted = {"own": 0, "away": 0, "free": 0}
+    for t in rng.choice(len(stars), 400, replace=False):
+        n1, n2 = int(nb[t, 0]), int(nb[t, 1])
+        d1, d2 = np.linalg.norm(stars[n1] - stars[t]), np.linalg.norm(stars[n2] - stars[t])
+        if d2 < 1.05 * d1:
+            continue  # the first neighbour alone within the chord
+        chord = 1.02 * d1
+        others = rng.integers(0, len(stars), 2)
+        if np.min(np.linalg.norm(stars[others] - stars[t], axis=1)) < 2 * chord:
+            continue
+        point = np.ascontiguousarray(stars[t][None])
+        cases = {"own": (np.array([[t, n1, others[0]]]), np.zeros((0, 3))),
+                 "away": (np.array([[t, others[0], others[1]]]), np.ascontiguousarray(stars[n1][None])),
+                 "free": (np.array([[t, others[0], others[1]]]), np.zeros((0, 3)))}
+        for name, (box, away) in cases.items():
+            tri_vec = np.ascontiguousarray(stars[box[0]])  # body = ICRS
+            args = (tri_vec, point, away, box.astype(np.int64), float(chord), 1e-7, fg.cell, fg.n_side, fg.keys,
+                    fg.starts, fg.stars, fg.vec, fg.columns, 0, none_mask)
+            want = _box_kernel(*args, np.zeros((0, 1), np.int32))
+            assert _box_kernel(*args, nb)[0] == want[0]
+            counted[name] += int(want[0])
+    assert counted["own"] == 0 and counted["away"] == 0 and counted["free"] > 50

@@ -59,3 +59,21 @@ def test_every_field_grid_gathers_the_same_stars() -> None:
                 n = collect_within(p[0], p[1], p[2], chord, g.cell, g.n_side, g.keys, g.starts, g.stars, g.vec,
                                    g.columns, buf)
                 np.testing.assert_array_equal(np.sort(buf[:n]), want)
+
+
+def test_star_neighbours_are_each_stars_nearest_others(seed000_db) -> None:
+    """Every star's kept neighbours are its nearest other stars, nearest first (brute force on a
+    sample), none of them itself."""
+    from service.core.star_index import NEIGHBOURS, star_neighbours
+
+    nb = star_neighbours(seed000_db)
+    assert nb is star_neighbours(seed000_db)
+    vec = np.asarray(seed000_db.stars.vec)
+    assert nb.shape == (len(vec), NEIGHBOURS) and nb.dtype == np.int32 and not nb.flags.writeable
+    rng = np.random.default_rng(4)
+    for i in rng.choice(len(vec), 300, replace=False):
+        d = np.linalg.norm(vec - vec[i], axis=1)
+        d[i] = np.inf
+        want = np.sort(d)[:NEIGHBOURS]
+        assert i not in nb[i]
+        np.testing.assert_allclose(d[nb[i]], want, rtol=0, atol=1e-12)

@@ -27,9 +27,9 @@ DEFAULT_MEMBERS: dict[str, BuildConfig] = {
         method_params={"maxangle": {"d_max_deg": 3.5}, "triangle": {"box_d_max_deg": 4.5}},
     ),
     "mid": BuildConfig(
-        fov_min_deg=7.0, fov_max_deg=12.5, mag_limit=6.5, double_star_sep_deg=0.02,
+        fov_min_deg=7.0, fov_max_deg=13.0, mag_limit=6.5, double_star_sep_deg=0.02,
         density_cap=12, density_radius_deg=4.0, methods=("quad", "maxangle", "pyramid"),
-        method_params={"maxangle": {"d_max_deg": 12.5}},
+        method_params={"maxangle": {"d_max_deg": 13.0}},
     ),
     "wide": BuildConfig(
         fov_min_deg=9.0, fov_max_deg=32.0, mag_limit=6.5, double_star_sep_deg=0.02,
@@ -43,11 +43,16 @@ DEFAULT_MEMBERS: dict[str, BuildConfig] = {
 """The default database set: a deep (V <= 8, density-capped) member for cameras of 3.5-16.5 deg
 diagonal, a V <= 7 one for 3.5-9 deg, a bright one for 9-32 deg (the real test images, most star
 trackers and wide-field cameras), and between them ``mid`` (V <= 6.5) for cameras of 7 deg side
-to 12.5 deg diagonal (the seed-000 camera, 8.6 deg), whose ``maxangle`` table holds every
-triangle up to 12.5 deg: the whole field of each camera it serves. (The narrow and wide members'
+to 13 deg diagonal (the seed-000 camera, 8.6 deg; seed 001's GF-7 camera, 8.9 deg), whose
+``maxangle`` table holds every triangle up to 13 deg: the whole field of each camera it serves. (The narrow and wide members'
 ``maxangle`` tables hold triangles up to their smallest camera's side; the whole field of their
 largest at their density would cost about 500x and 150x as many triangles.) ``mid`` costs ~15 s
-and ~220 MB of the build (docs/benchmarks.md, Batch).
+and ~225 MB of the build (docs/benchmarks.md, Batch). Until revision 6 it stopped at 12.5 deg, and
+seed 001's camera (12.56-deg diagonal) was served by ``narrow`` alone: bench_wrong's 99,960
+frames name 165 more of seed 001's with ``mid`` (19,754 -> 19,919, 0 wrong), but 2% fewer of
+its stars (333,857 -> 326,473), as on seed 000: stars past ``mid``'s density cap are named only
+when the answer re-verified against ``narrow`` is strongly proven there
+(``first_pass.settle_kernel``), which against V <= 8 takes more pairs.
 
 ``sparse`` is for narrow cameras that see only a few stars: against the deep member, a frame of
 3-4 stars cannot be proven (its many faint stars make any small pattern ambiguous and any lone
@@ -66,7 +71,7 @@ table 39 MB of them).
 7 deg side to 13 deg diagonal at V <= 6.5 (the pair table and its index: ~1.5 s of the build and
 6 MB). ``auto`` runs it on a rig after the first pass; for one camera it searches the other
 members only (``plan.RIG_METHOD``). Without it, seed 001's rig (GF-7's two 8.9-deg cameras, whose 12.6-deg
-diagonal only the deep ``narrow`` member serves) identified 93.3% of frames with 4 or more stars;
+diagonal only the deep ``narrow`` member served until revision 6) identified 93.3% of frames with 4 or more stars;
 with it 99.7-99.8% (990-991 of 993 in repeated runs), 0 wrong (``python -m bench.bench_rig --frames 1000 --mag-limit 5.5 --noise 0.5``)."""
 
 
@@ -84,7 +89,7 @@ def default_database_dir() -> Path:
     return Path(cache) / "skyfix" / "db"
 
 
-DEFAULT_REVISION = 5
+DEFAULT_REVISION = 6
 """The default set's contents, recorded in its manifest (``default_revision``): a default
 database of an older revision is rebuilt on first use, like one of an older schema, while
 databases a user built are left as they are. 2: ``maxangle`` tables in the ``cells`` layout
@@ -93,7 +98,8 @@ member (``multifov`` for rigs of 7-13 deg cameras). 4: ``quad`` tables with a sp
 (:data:`service.core.methods.quad_build.SPILL_OVER`; the same patterns, a third less time a
 look-up on the narrow member). 5: the ``sparse`` member's ``triangle`` holds a table of
 every triangle to 4.5 deg (``box_d_max_deg``; the same answers, seed 002's frames of 3-4 stars
-~35% faster)."""
+~35% faster). 6: ``mid`` serves cameras to 13 deg diagonal (12.5 before), seed 001's GF-7 camera
+(8.9 deg, 12.56-deg diagonal) among them."""
 
 
 def _outdated(path: Path) -> str | None:

@@ -8,10 +8,15 @@ centroid noise on the 15- and 20-deg cameras, 3 of the 6 wrong stars in 100,000 
 ``bench.bench_wrong`` (session 8) were such blobs: a 5.5-6.3 Mv star the ``wide`` member left out
 (its cap), named as a brighter held star 2.6-7 px away.
 
-So each star of a member knows its nearest neighbour among the stars that the set's most
-complete member holds and it does not (:func:`hidden_neighbours`), and a pair whose observed
-star lies within the crowding reach of that neighbour is dropped from the answer
-(:func:`hidden_kernel`), as the verifier would have left it had the member held the star.
+So each star of a member knows its nearest neighbour among the stars that some other member of
+the set holds and it does not (:func:`hidden_neighbours`), and a pair whose observed star lies
+within the crowding reach of that neighbour is dropped from the answer (:func:`hidden_kernel`),
+as the verifier would have left it had the member held the star. Until session 22 the
+neighbours came from the member holding the most stars alone (the deep ``narrow``, V <= 8), but
+its own density cap leaves out brighter stars in crowded fields that ``sparse`` (V <= 7, no cap)
+holds: a 6.3-Mv star that both ``wide`` and ``narrow`` left out was named as the 5.3-Mv star
+3.5 px away (seed 004, 2 px, ``bench_wrong --frames 20000 --seed 2``). The neighbours now come
+from every star any member holds.
 """
 
 from __future__ import annotations
@@ -41,22 +46,35 @@ NONE = np.zeros((0, len(MAG_STEPS)))
 def hidden_neighbours(member: NavDatabase) -> tuple[np.ndarray, np.ndarray]:
     """``(separation, limits)``: ``separation[i, k]`` is the angle (radians) from star ``i`` of
     ``member`` to its nearest neighbour of magnitude at most ``limits[k]`` among the stars the
-    set's most complete member holds and ``member`` does not (inf where there is none within
-    ``REACH_MAX_DEG``), ``limits`` = ``member``'s limit + ``MAG_STEPS``. Empty outside a set,
-    or for the most complete member; kept on ``member``."""
+    set's other members hold and ``member`` does not (inf where there is none within
+    ``REACH_MAX_DEG``), ``limits`` = ``member``'s limit + ``MAG_STEPS``. Empty outside a set, or
+    for a member that holds every star of the set; kept on ``member``."""
     cache = member.__dict__.setdefault("_cache", {})
     if "hidden" not in cache:
-        complete = member.__dict__.get("_complete")
+        together = member.__dict__.get("_set_members", ())
         limits = member.mag_limit + np.asarray(MAG_STEPS)
-        sep = NONE if complete is None or complete is member else _nearest_hidden(member, complete, limits)
-        cache["hidden"] = (sep, limits)
+        cache["hidden"] = (_nearest_hidden(member, together, limits), limits)
     return cache["hidden"]
 
 
-def _nearest_hidden(member: NavDatabase, complete: NavDatabase, limits: np.ndarray) -> np.ndarray:
-    vec = np.asarray(complete.stars.vec, np.float64)
-    mag = np.asarray(complete.stars.mag, np.float64)
-    held = np.isin(np.asarray(complete.stars.hip), np.asarray(member.stars.hip))
+def set_stars(together: tuple[NavDatabase, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(hip, vec, mag)`` of every star some member of ``together`` holds, once each (by HIP,
+    from the first member holding it)."""
+    hip = np.concatenate([np.asarray(m.stars.hip) for m in together])
+    vec = np.concatenate([np.asarray(m.stars.vec, np.float64) for m in together])
+    mag = np.concatenate([np.asarray(m.stars.mag, np.float64) for m in together])
+    _, first = np.unique(hip, return_index=True)
+    first.sort()
+    return hip[first], vec[first], mag[first]
+
+
+def _nearest_hidden(member: NavDatabase, together: tuple[NavDatabase, ...], limits: np.ndarray) -> np.ndarray:
+    if len(together) < 2:
+        return NONE
+    hip, vec, mag = set_stars(together)
+    held = np.isin(hip, np.asarray(member.stars.hip))
+    if held.all():
+        return NONE
     own = np.asarray(member.stars.vec, np.float64)
     sep = np.full((len(own), len(limits)), np.inf)
     reach = chord_from_angle(math.radians(REACH_MAX_DEG))

@@ -6,16 +6,14 @@ import math
 
 import numpy as np
 
-from service.core.hidden import MAG_STEPS, hidden_kernel, hidden_neighbours
+from service.core.hidden import MAG_STEPS, hidden_kernel, hidden_neighbours, set_stars
 
 ARCSEC = math.pi / 180 / 3600
 
 
 def test_hidden_neighbours_of_the_default_set(default_set_db) -> None:
     members = default_set_db.members
-    complete = max(members.values(), key=lambda m: len(m.stars))
-    sep, limits = hidden_neighbours(complete)
-    assert sep.shape == (0, len(MAG_STEPS))  # the most complete member leaves nothing out
+    hip_all, vec_all, _ = set_stars(tuple(members.values()))
     wide = members["wide"]
     sep, limits = hidden_neighbours(wide)
     assert sep.shape == (len(wide.stars), len(MAG_STEPS))
@@ -25,14 +23,32 @@ def test_hidden_neighbours_of_the_default_set(default_set_db) -> None:
     row = int(np.flatnonzero(np.asarray(wide.stars.hip) == 16335)[0])
     assert np.isinf(sep[row, 0])
     assert abs(sep[row, 2] / ARCSEC - 390) < 2
-    # the neighbour is a star the complete member holds and the wide member does not
-    hip = np.asarray(complete.stars.hip)
-    vec = np.asarray(complete.stars.vec, np.float64)
+    # the neighbour is a star another member holds and the wide member does not
     own = np.asarray(wide.stars.vec[row], np.float64)
-    ang = np.arccos(np.clip(vec @ own, -1, 1))
+    ang = np.arccos(np.clip(vec_all @ own, -1, 1))
     near = np.flatnonzero(np.abs(ang - sep[row, 2]) < ARCSEC)
-    assert len(near) and not np.isin(hip[near], np.asarray(wide.stars.hip)).any()
+    assert len(near) and not np.isin(hip_all[near], np.asarray(wide.stars.hip)).any()
     assert hidden_neighbours(wide) is hidden_neighbours(wide)  # kept on the member
+
+
+def test_a_star_only_the_uncapped_member_holds_is_a_hidden_neighbour(default_set_db) -> None:
+    """HIP 53100 (6.3 Mv) is left out by the density caps of both ``wide`` and the deep ``narrow``
+    (the member holding the most stars), and held by ``sparse``: it is the hidden neighbour of
+    ``wide``'s HIP 53154, 3.5 px away on seed 004's camera, for which it was once named
+    (``test_found_wrong``, session 22); and ``narrow`` leaves stars out too."""
+    members = default_set_db.members
+    for name in ("wide", "narrow"):
+        assert 53100 not in np.asarray(members[name].stars.hip)
+    assert 53100 in np.asarray(members["sparse"].stars.hip)
+    wide = members["wide"]
+    sep, limits = hidden_neighbours(wide)
+    row = int(np.flatnonzero(np.asarray(wide.stars.hip) == 53154)[0])
+    sparse = members["sparse"]
+    other = np.asarray(sparse.stars.vec[int(np.flatnonzero(np.asarray(sparse.stars.hip) == 53100)[0])], np.float64)
+    want = np.arccos(np.clip(other @ np.asarray(wide.stars.vec[row], np.float64), -1, 1))
+    col = int(np.argmax(limits >= 6.3))
+    assert sep[row, col] <= want + ARCSEC
+    assert np.isfinite(hidden_neighbours(members["narrow"])[0]).any()
 
 
 def test_hidden_kernel_drops_pairs_within_reach_of_a_hidden_star() -> None:

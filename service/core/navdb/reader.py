@@ -186,9 +186,9 @@ def open_database(path: str | os.PathLike[str], *, verify_hashes: bool = False) 
             if not isinstance(member, NavDatabase):
                 raise DatabaseCorruptError(f"{p / name}: nested database sets are not supported")
             opened[name] = member
-        complete = max(opened.values(), key=lambda m: len(m.stars))
-        for member in opened.values():  # the stars a member left out (service.core.hidden)
-            member.__dict__["_complete"] = complete
+        together = tuple(opened.values())
+        for member in together:  # the stars a member left out and another holds (service.core.hidden)
+            member.__dict__["_set_members"] = together
         return NavDatabaseSet(p, manifest, opened)
     arrays: dict[str, np.ndarray] = {}
     specs = manifest.get("arrays", {})

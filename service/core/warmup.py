@@ -13,6 +13,8 @@ import numpy as np
 from .attitude import matrix_from_radec_roll
 from .camera import Camera
 from .deeper import could_pair_more_deeper
+from .first_pass import deeper_arrays
+from .hidden import hidden_neighbours
 from .methods import get_matcher
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .pipeline import _ONE_CAMERA, _observation, solve, solve_rig
@@ -130,6 +132,13 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
         # first pass reaches (its first use in a request loaded it from numba's cache)
         could_pair_more_deeper(_observation([(frame, camera, None)], _ONE_CAMERA), member,
                                Verified(np.zeros(0, np.int64), np.zeros(0, np.int64), np.eye(3), 1.0, 0), 2.5)
+        # the rows of its stars in every other member (the deeper recheck's map) and the stars the
+        # others hold that it does not: built on a camera's first frame otherwise (~2 ms, 15-35 ms;
+        # the camera that first needed a pair was not always one of the frames above)
+        hidden_neighbours(member)
+        for other in members:
+            if other is not member:
+                deeper_arrays(member, other)
 
 
 def own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centroids]:

@@ -44,9 +44,10 @@ DEFAULT_MEMBERS: dict[str, BuildConfig] = {
 diagonal, a V <= 7 one for 3.5-9 deg, a bright one for 9-32 deg (the real test images, most star
 trackers and wide-field cameras), and between them ``mid`` (V <= 6.5) for cameras of 7 deg side
 to 13 deg diagonal (the seed-000 camera, 8.6 deg; seed 001's GF-7 camera, 8.9 deg), whose
-``maxangle`` table holds every triangle up to 13 deg: the whole field of each camera it serves. (The narrow and wide members'
-``maxangle`` tables hold triangles up to their smallest camera's side; the whole field of their
-largest at their density would cost about 500x and 150x as many triangles.) ``mid`` costs ~15 s
+``maxangle`` table holds every triangle up to 13 deg: the whole field of each camera it serves.
+(The narrow and wide members' ``maxangle`` tables hold triangles up to their smallest camera's
+side; the whole field of their largest at their density would cost about 500x and 150x as many
+triangles.) ``mid`` costs ~15 s
 and ~225 MB of the build (docs/benchmarks.md, Batch). Until revision 6 it stopped at 12.5 deg, and
 seed 001's camera (12.56-deg diagonal) was served by ``narrow`` alone: bench_wrong's 99,960
 frames name 165 more of seed 001's with ``mid`` (19,754 -> 19,919, 0 wrong), but 2% fewer of

@@ -132,12 +132,13 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
         # first pass reaches (its first use in a request loaded it from numba's cache)
         could_pair_more_deeper(_observation([(frame, camera, None)], _ONE_CAMERA), member,
                                Verified(np.zeros(0, np.int64), np.zeros(0, np.int64), np.eye(3), 1.0, 0), 2.5)
-        # the rows of its stars in every other member (the deeper recheck's map) and the stars the
-        # others hold that it does not: built on a camera's first frame otherwise (~2 ms, 15-35 ms;
-        # the camera that first needed a pair was not always one of the frames above)
+        # the rows of its stars in each member a plan may refine its answers against (the deeper
+        # recheck's map: the deepest fitting member, none shallower) and the stars the others hold
+        # that it does not: built on a camera's first frame otherwise (~3 ms, 8-30 ms; the camera
+        # that first needed a pair was not always one of the frames above)
         hidden_neighbours(member)
         for other in members:
-            if other is not member:
+            if other is not member and other.mag_limit >= member.mag_limit:
                 deeper_arrays(member, other)
 
 

@@ -212,74 +212,60 @@ def query_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_ta
     misses then overlap instead of following one another; the records read, and the answer,
     are the same."""
     n_tri = len(theta)
-    n_cell_q = 0  # (triangle, cell) pairs, in the order the scan takes them
-    cap = 0
-    for t in range(n_tri):
+    q_off = np.zeros(n_tri + 1, np.int64)  # triangle t's cells are q_off[t]:q_off[t + 1], in scan order
+    for t in range(n_tri):  # the cells' starts requested
         ib0, ib1 = _cell_range(sides[t, 1], eps, b_scale, n_cells)
         ic0, ic1 = _cell_range(sides[t, 2], eps, b_scale, n_cells)
+        n_q = 0
         for i_b in range(ib0, ib1 + 1):
             top = min(ic1, i_b)
-            if top < ic0:
-                continue
-            prefetch(cell_start, np.int64(i_b * n_cells + ic0))
-            prefetch(cell_start, np.int64(i_b * n_cells + top + 1))
-            n_cell_q += top - ic0 + 1
-        if max_per_triangle > 0:
-            cap += max_per_triangle + 1
-    q_cell = np.empty(n_cell_q, np.int64)
-    q_start = np.empty(n_cell_q, np.int64)
-    q_end = np.empty(n_cell_q, np.int64)
-    q = 0
+            if top >= ic0:
+                prefetch(cell_start, np.int64(i_b * n_cells + ic0))
+                prefetch(cell_start, np.int64(i_b * n_cells + top + 1))
+                n_q += top - ic0 + 1
+        q_off[t + 1] = q_off[t] + n_q
+    q_cell = np.empty(q_off[n_tri], np.int64)
+    q_start = np.empty(q_off[n_tri], np.int64)  # the cell's records, then its theta slice's
+    q_end = np.empty(q_off[n_tri], np.int64)
     for t in range(n_tri):  # the cells' keys requested
         ib0, ib1 = _cell_range(sides[t, 1], eps, b_scale, n_cells)
         ic0, ic1 = _cell_range(sides[t, 2], eps, b_scale, n_cells)
+        q = q_off[t]
         for i_b in range(ib0, ib1 + 1):
             for i_c in range(ic0, min(ic1, i_b) + 1):
                 cell = i_b * n_cells + i_c
-                lo, hi = cell_start[cell], cell_start[cell + 1]
-                q_cell[q], q_start[q], q_end[q] = cell, lo, hi
-                _prefetch_span(key, lo, hi, 8)
+                q_cell[q], q_start[q], q_end[q] = cell, cell_start[cell], cell_start[cell + 1]
+                _prefetch_span(key, q_start[q], q_end[q], 8)
                 q += 1
     ids_flat = ids.reshape(-1)
-    q = 0
+    cap = 0
     for t in range(n_tri):  # the theta slices found, their sides and stars requested
-        th, tl = theta[t], tol[t]
-        f_lo = (th - tl - THETA_LO) / THETA_SPAN - _EDGE
-        f_hi = (th + tl - THETA_LO) / THETA_SPAN + _EDGE
-        ib0, ib1 = _cell_range(sides[t, 1], eps, b_scale, n_cells)
-        ic0, ic1 = _cell_range(sides[t, 2], eps, b_scale, n_cells)
-        for i_b in range(ib0, ib1 + 1):
-            for i_c in range(ic0, min(ic1, i_b) + 1):
-                cell, lo, hi = q_cell[q], q_start[q], q_end[q]
-                if lo < hi:
-                    part = key[lo:hi]
-                    start = lo + np.searchsorted(part, cell + f_lo, side="left")
-                    end = lo + np.searchsorted(part, cell + f_hi, side="right")
-                    q_start[q], q_end[q] = start, end
-                    _prefetch_span(b_tab, start, end, 16)
-                    _prefetch_span(c_tab, start, end, 16)
-                    _prefetch_span(ids_flat, 3 * start, 3 * end, 8)
-                    if max_per_triangle <= 0:
-                        cap += max(end - start, 0)
-                q += 1
+        f_lo = (theta[t] - tol[t] - THETA_LO) / THETA_SPAN - _EDGE
+        f_hi = (theta[t] + tol[t] - THETA_LO) / THETA_SPAN + _EDGE
+        for q in range(q_off[t], q_off[t + 1]):
+            lo, hi = q_start[q], q_end[q]
+            if lo < hi:
+                part = key[lo:hi]
+                q_start[q] = lo + np.searchsorted(part, q_cell[q] + f_lo, side="left")
+                q_end[q] = lo + np.searchsorted(part, q_cell[q] + f_hi, side="right")
+                _prefetch_span(b_tab, q_start[q], q_end[q], 16)
+                _prefetch_span(c_tab, q_start[q], q_end[q], 16)
+                _prefetch_span(ids_flat, 3 * q_start[q], 3 * q_end[q], 8)
+                cap += max(q_end[q] - q_start[q], 0)
+    if max_per_triangle > 0:
+        cap = min(cap, n_tri * (max_per_triangle + 1))
     rows = np.empty(cap, np.int64)
     which = np.empty(cap, np.int64)
     n_out = 0
-    q = 0
     for t in range(n_tri):
         first = n_out
         a_obs, b_obs, c_obs = sides[t, 0], sides[t, 1], sides[t, 2]
         th, tl = theta[t], tol[t]
         h_obs = triple_product(obs_vec[labels[t, 0]], obs_vec[labels[t, 1]], obs_vec[labels[t, 2]])
-        ib0, ib1 = _cell_range(b_obs, eps, b_scale, n_cells)
-        ic0, ic1 = _cell_range(c_obs, eps, b_scale, n_cells)
-        n_q = 0
-        for i_b in range(ib0, ib1 + 1):
-            n_q += max(min(ic1, i_b) - ic0 + 1, 0)
         full = False
-        for qi in range(q, q + n_q):
-            cell = q_cell[qi]
-            for r in range(q_start[qi], q_end[qi]):
+        for q in range(q_off[t], q_off[t + 1]):
+            cell = q_cell[q]
+            for r in range(q_start[q], q_end[q]):
                 if abs(b_tab[r] - b_obs) > eps or abs(c_tab[r] - c_obs) > eps:
                     continue
                 th_rec = THETA_LO + (key[r] - cell) * THETA_SPAN
@@ -293,7 +279,6 @@ def query_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_ta
                     break
             if full:
                 break
-        q += n_q
         if full:
             n_out = first
     return rows[:n_out].copy(), which[:n_out].copy()

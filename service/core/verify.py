@@ -130,6 +130,8 @@ class Verifier:
     _first_marginal_at: int | None = None
     _marginal_maps: list[dict[int, int]] | None = field(default=None, repr=False)
     _near_cache: tuple[FloatArray, IntArray, IntArray] | None = field(default=None, repr=False)
+    _pair_chance: float | None = field(default=None, repr=False)
+    """:meth:`could_prove`'s ``p``, made on its first call (the frame and radius are fixed)."""
 
     def settled(self) -> bool:
         """True once a marginal answer has had ``confirm_patterns`` patterns to be beaten."""
@@ -152,9 +154,18 @@ class Verifier:
         extra = n - hypothesis_stars
         if n < self.min_matches or extra < 1:
             return False
-        area = sum(float(c.width) * float(c.height) for c in self.obs.cameras)
-        p = min(1.0, n * math.pi * self.match_radius_px ** 2 / area)
+        p = self._pair_chance
+        if p is None:
+            area = sum(float(c.width) * float(c.height) for c in self.obs.cameras)
+            p = self._pair_chance = min(1.0, n * math.pi * self.match_radius_px ** 2 / area)
         return p ** extra * max(self.trials, 1) <= self.max_false_prob
+
+    def count_unchecked(self, n_candidates: int) -> None:
+        """Count one observed pattern's ``n_candidates`` candidates as tried without checking
+        them: for a method that skips a pattern once :meth:`could_prove` says no check could
+        pass (the trials only grow, so none could later either)."""
+        self.patterns += 1
+        self.trials += n_candidates
 
     def best_marginal(self) -> Verified | None:
         """The most probable marginal answer, or None if there is none or they disagree.

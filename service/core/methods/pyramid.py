@@ -95,8 +95,8 @@ class PyramidMatcher:
         empty = 0
         known_empty = empty_triangles(obs, self.pairs, tol)
         for i, j, k in pattern_order(n):
-            if ctx.expired():
-                break
+            if ctx.expired() or not ctx.verifier.could_prove(3):
+                break  # (no later triangle's answer could pass the bound: trials only grow)
             sides = (d[i, j], d[i, k], d[j, k])
             if max(sides) > self.max_angle - tol or min(sides) < 4 * tol:
                 continue

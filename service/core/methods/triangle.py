@@ -236,6 +236,11 @@ class TriangleMatcher:
                 unique.append((idx, cand[0]))
             if len(cand) == 0 or len(cand) > MAX_CANDIDATES:
                 continue
+            if not ctx.verifier.could_prove(3):
+                # no check of a triangle could pass the bound any more (a 3-4 star frame past a
+                # trial or two): counted as tried, as the screen would count them, and not checked
+                ctx.verifier.count_unchecked(len(cand))
+                continue
             found = ctx.verifier.screen_and_check(idx, cand)
             if found is not None:
                 return found

@@ -306,6 +306,39 @@ def _pair_angle(u: np.ndarray, v: np.ndarray) -> float:
     return 2.0 * math.asin(min(max(math.sqrt(dx * dx + dy * dy + dz * dz) / 2.0, 0.0), 1.0))
 
 
+_CHORD_SLACK = 1e-9
+"""Relative margin in squared chord about a window's bounds, inside which :func:`box_cells`
+measures the angle itself (float rounding of either form is ~1e-16 relative)."""
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _chord2(u: np.ndarray, v: np.ndarray) -> float:
+    """Squared chord between unit vectors, summed as :func:`_pair_angle` sums it."""
+    dx, dy, dz = u[0] - v[0], u[1] - v[1], u[2] - v[2]
+    return dx * dx + dy * dy + dz * dz
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _chord2_window(lo: float, hi: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The angle window ``[lo, hi]`` (rad) in squared chord: bounds outside which a pair is out
+    of it and inside which it is in, whatever the rounding (``_CHORD_SLACK`` apart)."""
+    q_lo = -1.0
+    if lo > 0.0:
+        c = 2.0 * math.sin(lo / 2.0)
+        q_lo = c * c
+    c = 2.0 * math.sin(min(hi, math.pi) / 2.0)
+    q_hi = c * c
+    s = _CHORD_SLACK
+    return (q_lo * (1.0 - s) if q_lo > 0 else -1.0, q_hi * (1.0 + s)), (q_lo * (1.0 + s) if q_lo > 0 else -1.0,
+                                                                       q_hi * (1.0 - s))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _rank(x: float, y: float, z: float) -> int:
+    """How many of ``y``, ``z`` are smaller than ``x`` (0 for the shortest of three sides)."""
+    return (1 if y < x else 0) + (1 if z < x else 0)
+
+
 _PERMS = ((0, 1, 2), (1, 2, 0), (2, 0, 1), (0, 2, 1), (2, 1, 0), (1, 0, 2))
 """The six vertex orders, the even (handedness-keeping) three first."""
 _EVEN = (True, True, True, False, False, False)
@@ -348,6 +381,19 @@ def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab:
         return False, none  # (a table of every theta_max, 180 deg, holds them whatever the box)
     lo01, hi01, lo02, hi02, lo12, hi12 = s01 - w, s01 + w, s02 - w, s02 + w, s12 - w, s12 + w
     h_obs = triple_product(obs_vec[0], obs_vec[1], obs_vec[2])
+    # sides more than 2 (w + m) apart: a triangle within w of them on every side keeps their
+    # order, so only one vertex order can match a record (the one that pairs sides by rank: the
+    # record's vertex opposite its shortest side, q2, to the observed vertex opposite the
+    # shortest, and so on): its stars decide in that order alone (the loop over six finds no other)
+    single = a0 - b0 > 2 * (w + m) and b0 - c0 > 2 * (w + m)
+    o0 = 2 - _rank(s12, s01, s02)  # the record vertex each observed vertex maps to
+    o1 = 2 - _rank(s02, s01, s12)
+    o2 = 2 - _rank(s01, s02, s12)
+    single_even = (o0 == 0 and o1 == 1) or (o0 == 1 and o1 == 2) or (o0 == 2 and o1 == 0)
+    o01, o02, o12 = o0 + o1 - 1, o0 + o2 - 1, o1 + o2 - 1
+    out01, in01 = _chord2_window(lo01, hi01)
+    out02, in02 = _chord2_window(lo02, hi02)
+    out12, in12 = _chord2_window(lo12, hi12)
     width = b_scale / n_cells
     ib0, ib1 = _cell_range(b0, w + m, b_scale, n_cells)
     ic0, ic1 = _cell_range(c0, w + m, b_scale, n_cells)
@@ -376,6 +422,27 @@ def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab:
                 b_rec, c_rec = float(b_tab[r]), float(c_tab[r])
                 if abs(b_rec - b0) > w + m or abs(c_rec - c0) > w + m:
                     continue
+                if single:
+                    q = (ids[r, 0], ids[r, 1], ids[r, 2])
+                    right = triple_product(star_vec[q[0]], star_vec[q[1]], star_vec[q[2]]) > 0
+                    if (right == (h_obs > 0)) != single_even:
+                        continue  # that order mirrors the triangle
+                    # the windows in squared chord, away from their bounds (no asin); near one, the
+                    # angles themselves, as the pair table measures them
+                    e0 = _chord2(star_vec[q[0]], star_vec[q[1]])
+                    e1 = _chord2(star_vec[q[0]], star_vec[q[2]])
+                    e2 = _chord2(star_vec[q[1]], star_vec[q[2]])
+                    d01, d02, d12 = _of(o01, e0, e1, e2), _of(o02, e0, e1, e2), _of(o12, e0, e1, e2)
+                    if d01 < out01[0] or d01 > out01[1] or d02 < out02[0] or d02 > out02[1] or d12 < out12[0] \
+                            or d12 > out12[1]:
+                        continue
+                    if not (in01[0] < d01 < in01[1] and in02[0] < d02 < in02[1] and in12[0] < d12 < in12[1]) \
+                            and not _in_windows(star_vec, q[0], q[1], q[2], o01, o02, o12, lo01, hi01, lo02, hi02,
+                                                lo12, hi12):
+                        continue
+                    out = _push(out, n, q[o0], q[o1], q[o2])
+                    n += 1
+                    continue
                 # the longest side, rebuilt from the record (float32 sides: within ~1e-8), except
                 # past the key's clip (~179.9 deg), where the stored theta is not the record's:
                 # there the stars' own angles decide every order (clipped)
@@ -389,7 +456,6 @@ def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab:
                 # the record's sides by vertex pair: (q0, q1) is opposite q2, so it is c; (q0, q2)
                 # is b; (q1, q2) is a. Within ~1e-8 of the stars' own angles, computed only for the
                 # orders these let through
-                e0 = e1 = e2 = -1.0
                 for k in range(6):
                     if (right == (h_obs > 0)) != _EVEN[k]:
                         continue  # an odd order mirrors the triangle
@@ -399,17 +465,32 @@ def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab:
                                         or abs(_of(j02, c_rec, b_rec, a_rec) - s02) > w + m
                                         or abs(_of(j12, c_rec, b_rec, a_rec) - s12) > w + m):
                         continue
-                    if e0 < 0.0:
-                        e0 = _pair_angle(star_vec[q[0]], star_vec[q[1]])
-                        e1 = _pair_angle(star_vec[q[0]], star_vec[q[2]])
-                        e2 = _pair_angle(star_vec[q[1]], star_vec[q[2]])
-                    d01, d02, d12 = _of(j01, e0, e1, e2), _of(j02, e0, e1, e2), _of(j12, e0, e1, e2)
-                    if d01 < lo01 or d01 > hi01 or d02 < lo02 or d02 > hi02 or d12 < lo12 or d12 > hi12:
+                    if not _in_windows(star_vec, q[0], q[1], q[2], j01, j02, j12, lo01, hi01, lo02, hi02, lo12,
+                                       hi12):
                         continue
-                    if n == len(out):
-                        grown = np.empty((2 * n, 3), np.int64)
-                        grown[:n] = out
-                        out = grown
-                    out[n, 0], out[n, 1], out[n, 2] = q[i0], q[i1], q[i2]
+                    out = _push(out, n, q[i0], q[i1], q[i2])
                     n += 1
     return True, out[:n].copy()
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _in_windows(star_vec: np.ndarray, q0: int, q1: int, q2: int, j01: int, j02: int, j12: int, lo01: float,
+                hi01: float, lo02: float, hi02: float, lo12: float, hi12: float) -> bool:
+    """Do the angles of stars ``q0``-``q1``, ``q0``-``q2`` and ``q1``-``q2`` (sides 0, 1, 2, as the pair
+    table measures them) taken as the sides ``j01``, ``j02``, ``j12`` lie in their windows?"""
+    e0 = _pair_angle(star_vec[q0], star_vec[q1])
+    e1 = _pair_angle(star_vec[q0], star_vec[q2])
+    e2 = _pair_angle(star_vec[q1], star_vec[q2])
+    d01, d02, d12 = _of(j01, e0, e1, e2), _of(j02, e0, e1, e2), _of(j12, e0, e1, e2)
+    return lo01 <= d01 <= hi01 and lo02 <= d02 <= hi02 and lo12 <= d12 <= hi12
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _push(out: np.ndarray, n: int, a: int, b: int, c: int) -> np.ndarray:
+    """``out`` (grown by doubling when full) with row ``n`` set to ``(a, b, c)``."""
+    if n == len(out):
+        grown = np.empty((2 * n, 3), np.int64)
+        grown[:n] = out
+        out = grown
+    out[n, 0], out[n, 1], out[n, 2] = a, b, c
+    return out

@@ -7,6 +7,7 @@ uses the rows within its own (:meth:`SharedPairs.rows`).
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from collections.abc import Iterable, Mapping
@@ -132,6 +133,28 @@ def pattern_order(n: int) -> list[tuple[int, int, int]]:
             for i in range(0, n - dj - dk):
                 out.append((i, i + dj, i + dj + dk))
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def upper_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n, 1)``, kept per ``n`` (~15 us a call; read only)."""
+    rows, cols = np.triu_indices(n, 1)
+    rows.flags.writeable = cols.flags.writeable = False
+    return rows, cols
+
+
+def pair_windows(angles: np.ndarray, d: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Row ranges ``[start, end)`` (``(n, n)`` each, symmetric) of the sorted pair ``angles``
+    within ``tol`` of each observed pair angle ``d[i, j]`` (rad), looked up once a pair: a
+    search of a 6-million-row table (the ``narrow`` member's) reads ~23 cold cache lines."""
+    n = len(d)
+    rows, cols = upper_pairs(n)
+    vals = d[rows, cols]
+    start = np.zeros((n, n), np.int64)
+    end = np.zeros((n, n), np.int64)
+    start[rows, cols] = start[cols, rows] = np.searchsorted(angles, vals - tol, side="left")
+    end[rows, cols] = end[cols, rows] = np.searchsorted(angles, vals + tol, side="right")
+    return start, end
 
 
 def empty_triangles(obs: Any, pairs: np.ndarray, tol: float) -> set[tuple[int, int, int]]:

@@ -27,6 +27,7 @@ from ._pairs import (
     empty_triangles,
     join_windows,
     pair_limits,
+    pair_windows,
     pattern_order,
     require_shared,
     same_handedness,
@@ -103,8 +104,7 @@ class PyramidMatcher:
             cand = None if self.table is None else table_join(self.table, v[[i, j, k]], d[i, j], d[i, k], d[j, k], tol)
             if cand is None:  # no triangle table, or one that may not hold them all: the join
                 if windows is None:  # every pair's window of the pair table at once
-                    windows = (np.searchsorted(self.angles, d - tol, side="left"),
-                               np.searchsorted(self.angles, d + tol, side="right"))
+                    windows = pair_windows(self.angles, d, tol)
                 start, end = windows
                 cand = join_windows(self.pairs, int(start[i, j]), int(end[i, j]), int(start[i, k]), int(end[i, k]),
                                     int(start[j, k]), int(end[j, k]), self.n_stars)

@@ -52,6 +52,7 @@ from ._pairs import (
     pair_limits,
     require_shared,
     same_handedness,
+    upper_pairs,
 )
 from ._table_join import build_box_table, table_join, table_triples, triangle_table
 from .base import Progress, SolveContext
@@ -205,7 +206,7 @@ class TriangleMatcher:
         tris = list(combinations(range(n), 3))
         if self.order == "brightness" or len(tris) <= 1:
             return tris
-        iu = _upper_pairs(n)
+        iu = upper_pairs(n)
         s, e = self.windows(d[iu] - eps, d[iu] + eps)
         count = np.zeros((n, n))
         count[iu] = np.maximum(e - s, 1)
@@ -298,14 +299,6 @@ class TriangleMatcher:
                 return None
             box = self.box_triples(v, w)
         return box, w
-
-
-@functools.lru_cache(maxsize=64)
-def _upper_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``np.triu_indices(n, 1)``, kept per ``n`` (~15 us a call; read only)."""
-    rows, cols = np.triu_indices(n, 1)
-    rows.flags.writeable = cols.flags.writeable = False
-    return rows, cols
 
 
 def _names(v: Verified, obs_idx: np.ndarray, cat_idx: np.ndarray) -> bool:

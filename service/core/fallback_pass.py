@@ -12,7 +12,7 @@ of a ~100-150 us frame of seed 002 (docs/performance.md, session 17), ~50 us of 
 frame of 11-39 points on seed 000's camera (session 18). Here the same passes run in one
 compiled call (:func:`chain_kernel`):
 
-- ``maxangle``: the frame's triangles (:func:`~.methods.maxangle._triangles_of`), every chunk
+- ``maxangle``: the frame's triangles (:func:`~.methods.maxangle._triangles_extended`), every chunk
   through :func:`~.methods.maxangle_search.search_chunks` (one call where Python made one per
   64 triangles to check the clock: the passes' work is bounded by the hypothesis budget), then
   the likeliest marginal answer if all agree (:func:`~.verify.marginal_choice`); skipped where
@@ -39,7 +39,13 @@ import numpy as np
 from numba import njit
 
 from .methods import get_matcher
-from .methods.maxangle import MAX_CANDIDATES, _pattern_array, _triangles_of
+from .methods.maxangle import (
+    EXTENSION_TRIALS,
+    MAX_CANDIDATES,
+    _extension_array,
+    _pattern_array,
+    _triangles_extended,
+)
 from .methods.maxangle_search import STOP_NONE, search_chunks
 from .methods.maxangle_search import _static_args as maxangle_args
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS
@@ -133,7 +139,8 @@ def fallbacks(obs: Observation, plan: list[tuple[NavDatabase, list[str]]], trial
     k = obs.kernel_arrays
     status, at, m_obs, m_cat, r, prob, n_trials, trials_out, ran = chain_kernel(
         obs.vec, obs.xy, k.mounts, k.cams, k.dist, k.rows, k.row_off, _image_probes(obs), kinds, members, int(trials),
-        int(few_trials), n_tri, _pattern_array(n_tri), float(tol), float(radius), float(scale),
+        int(few_trials), n_tri, _pattern_array(n_tri), _extension_array(n_tri, len(obs)), float(tol), float(radius),
+        float(scale),
         float(max_false_prob), float(Verifier.strong_false_prob), int(Verifier.confirm_patterns),
         int(Verifier.screen_stars), int(Verifier.min_matches), float(cam.width) * float(cam.height),
         3.0 * radius * scale, MAX_CANDIDATES, CHECKS_PER_CHUNK, QUERY_STARS, MAX_PROBES, MAX_CHECKS, *static)
@@ -223,7 +230,8 @@ def _chunk_bounds(total):
 
 
 @njit(cache=True, nogil=True)
-def _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, limit, n_tri, tri, tol, radius_px,
+def _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, limit, n_tri, tri, tri_ext, tol,
+                   radius_px,
                    pixel_scale, max_false_prob, strong_false_prob, confirm_patterns, screen_stars, max_candidates,
                    checks_per_chunk, cells, key, bucket_start, tab_x, tab_y, ids, n_buckets, b_scale, screen_chord,
                    s_cell, s_side, s_keys, s_starts, s_stars, s_columns, mask_n, mask_words, star_vec, g_cell, g_side,
@@ -232,10 +240,11 @@ def _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, l
     prob, trials, marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials)``: the marginal
     answers held, as ``quad_search`` returns its own."""
     n_obs = len(obs_vec)
-    labels, sides, theta, tol_t = _triangles_of(obs_vec[:n_tri], tri, tol, d_max, xi)
-    bounds = _chunk_bounds(len(labels))
+    labels, sides, theta, tol_t, n_first = _triangles_extended(obs_vec, n_tri, tri, tri_ext, tol, d_max, xi)
+    bounds = _chunk_bounds(n_first)
     n_chunks = len(bounds) - 1
-    room = checks_per_chunk * n_chunks
+    bounds_ext = _chunk_bounds(len(labels) - n_first)  # the extension's triangles, searched after
+    room = checks_per_chunk * (n_chunks + len(bounds_ext) - 1)
     marg_r = np.empty((room, 3, 3))
     marg_prob = np.empty(room)
     marg_off = np.zeros(room + 1, np.int64)
@@ -245,11 +254,22 @@ def _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, l
     state = np.array([trials, 0, -1, 0, STOP_NONE], np.int64)
     n_others = min(n_obs, screen_stars + 3)
     found, m_obs, m_cat, r, prob, _ = search_chunks(
-        obs_vec, obs_xy, labels, sides, theta, tol_t, bounds, 0, n_chunks, tol, n_others, mounts, cams, dist, rows,
-        row_off, state, limit, confirm_patterns, max_false_prob, strong_false_prob, checks_per_chunk, max_candidates,
-        marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials, radius_px, pixel_scale, cells, key,
-        bucket_start, tab_x, tab_y, ids, n_buckets, b_scale, screen_chord, s_cell, s_side, s_keys, s_starts, s_stars,
-        s_columns, mask_n, mask_words, star_vec, g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord)
+        obs_vec, obs_xy, labels[:n_first], sides[:n_first], theta[:n_first], tol_t[:n_first], bounds, 0, n_chunks,
+        tol, n_others, mounts, cams, dist, rows, row_off, state, limit, confirm_patterns, max_false_prob,
+        strong_false_prob, checks_per_chunk, max_candidates, marg_r, marg_prob, marg_off, marg_obs, marg_cat,
+        marg_trials, radius_px, pixel_scale, cells, key, bucket_start, tab_x, tab_y, ids, n_buckets, b_scale,
+        screen_chord, s_cell, s_side, s_keys, s_starts, s_stars, s_columns, mask_n, mask_words, star_vec, g_cell,
+        g_side, g_keys, g_starts, g_stars, g_columns, near_chord)
+    if not found and state[4] == STOP_NONE and state[3] == 0 and n_first < len(labels):
+        # (maxangle_search.search: the extension's triangles, at most EXTENSION_TRIALS more hypotheses)
+        limit_ext = state[0] + EXTENSION_TRIALS if limit < 0 else min(limit, state[0] + EXTENSION_TRIALS)
+        found, m_obs, m_cat, r, prob, _ = search_chunks(
+            obs_vec, obs_xy, labels[n_first:], sides[n_first:], theta[n_first:], tol_t[n_first:], bounds_ext, 0,
+            len(bounds_ext) - 1, tol, n_others, mounts, cams, dist, rows, row_off, state, limit_ext,
+            confirm_patterns, max_false_prob, strong_false_prob, checks_per_chunk, max_candidates, marg_r, marg_prob,
+            marg_off, marg_obs, marg_cat, marg_trials, radius_px, pixel_scale, cells, key, bucket_start, tab_x,
+            tab_y, ids, n_buckets, b_scale, screen_chord, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,
+            mask_n, mask_words, star_vec, g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord)
     n_marg = state[3]
     return (found, m_obs, m_cat, r, prob, state[0], marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1],
             marg_obs[:marg_off[n_marg]], marg_cat[:marg_off[n_marg]], marg_trials[:n_marg])
@@ -257,7 +277,8 @@ def _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, l
 
 @njit(cache=True, nogil=True)
 def chain_kernel(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, probes, kinds, members, trials, few_trials, n_tri,
-                 tri, tol, radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns, screen_stars,
+                 tri, tri_ext,
+                 tol, radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns, screen_stars,
                  min_matches, area, agree_limit, max_candidates, checks_per_chunk, n_use, max_probes, max_checks,
                  q_patterns, q_table, q_spill, q_ratio_bin, q_edge_bin, q_edge_max, q_star_vec, q_s_cell, q_s_side,
                  q_s_keys,
@@ -307,8 +328,8 @@ def chain_kernel(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, probes, kin
                           b_mask_words, b_star_vec, b_g_cell, b_g_side, b_g_keys, b_g_starts, b_g_stars, b_g_columns,
                           b_near_chord, b_d_max, b_xi)
             found, m_obs, m_cat, r, prob, trials, marg_r, marg_prob, marg_off, marg_obs, marg_cat, marg_trials = \
-                _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, limit, n_tri, tri, tol,
-                               radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns,
+                _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, limit, n_tri, tri, tri_ext,
+                               tol, radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns,
                                screen_stars, max_candidates, checks_per_chunk, *member)
         else:  # quad on the other member
             search = quad_search(obs_vec, obs_xy, n_use, tol, q_patterns, q_table, q_spill, q_ratio_bin, q_edge_bin,

@@ -26,7 +26,7 @@ KERNELS = {
     "service.core.check_kernel": ["verify_pairs", "recheck_pairs", "could_pair_more"],
     "service.core.match": ["_refine", "_match_rig", "_wahba_pairs"],
     "service.core.answer": ["answer_kernel"],
-    "service.core.methods.maxangle": ["_triangles_of"],
+    "service.core.methods.maxangle": ["_triangles_extended"],
     "service.core.methods.maxangle_search": ["search_chunks"],
 }
 
@@ -67,6 +67,6 @@ def test_the_default_path_compiles_each_kernel_once(default_set_db: object) -> N
         assert len(sigs) <= 1, (name, sigs)
     # called from Python (quad_search no longer is on these frames: since session 18 the
     # fallbacks of a frame of more than QUERY_STARS stars run compiled too, as a small frame's did)
-    for name in ("first_pass_kernel", "settle_kernel", "chain_kernel", "_triangles_of", "search_chunks",
+    for name in ("first_pass_kernel", "settle_kernel", "chain_kernel", "_triangles_extended", "search_chunks",
                  "frame_first_pass_kernel"):
         assert len(signatures[name]) == 1, (name, signatures[name])

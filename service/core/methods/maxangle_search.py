@@ -172,7 +172,28 @@ def _call_plan(total: int) -> tuple[np.ndarray, tuple[tuple[int, int], ...]]:
 
 
 def search(matcher: Any, ctx: SolveContext, labels: np.ndarray, sides: np.ndarray, theta: np.ndarray,
-           tol: np.ndarray, eps: float, max_candidates: int) -> Verified | None:
+           tol: np.ndarray, eps: float, max_candidates: int, n_first: int | None = None,
+           extension_trials: int = 0) -> Verified | None:
+    """:func:`_search` of the first ``n_first`` triangles (all by default), then, where they left
+    no answer, marginal answer or stop, of the rest with at most ``extension_trials`` more
+    hypotheses (``maxangle._triangles_extended``)."""
+    n_first = len(labels) if n_first is None else n_first
+    ver = ctx.verifier
+    held = len(ver.marginal)
+    found, stop = _search(matcher, ctx, labels[:n_first], sides[:n_first], theta[:n_first], tol[:n_first], eps,
+                          max_candidates, ver.trial_limit)
+    if found is not None or stop != STOP_NONE or len(ver.marginal) > held or n_first == len(labels) \
+            or ctx.expired():
+        return found
+    limit = ver.trials + extension_trials
+    if ver.trial_limit is not None:
+        limit = min(limit, ver.trial_limit)
+    return _search(matcher, ctx, labels[n_first:], sides[n_first:], theta[n_first:], tol[n_first:], eps,
+                   max_candidates, limit)[0]
+
+
+def _search(matcher: Any, ctx: SolveContext, labels: np.ndarray, sides: np.ndarray, theta: np.ndarray,
+            tol: np.ndarray, eps: float, max_candidates: int, trial_limit: int | None) -> tuple[Verified | None, int]:
     """:meth:`MaxAngleMatcher.identify`'s search of a one-camera frame's observed triangles
     (sorted, with their sides, ``theta_max`` and its tolerance, radians; a triangle with more
     than ``max_candidates`` catalogue matches is dropped) through :func:`search_chunks`; the
@@ -184,7 +205,7 @@ def search(matcher: Any, ctx: SolveContext, labels: np.ndarray, sides: np.ndarra
     held = ver.marginal
     state = np.array([ver.trials, ver.patterns, -1 if ver._first_marginal_at is None else ver._first_marginal_at,
                       len(held), STOP_NONE], np.int64)
-    limit = -1 if ver.trial_limit is None else int(ver.trial_limit)
+    limit = -1 if trial_limit is None else int(trial_limit)
     n_others = min(len(obs), ver.screen_stars + 3)
     for c0, c1 in plan:
         if ctx.expired():
@@ -204,10 +225,10 @@ def search(matcher: Any, ctx: SolveContext, labels: np.ndarray, sides: np.ndarra
             held.append(Verified(marg_obs[lo:hi].copy(), marg_cat[lo:hi].copy(), marg_r[j].copy(),
                                  float(marg_prob[j]), int(marg_trials[j])))
         if found:
-            return Verified(m_obs, m_cat, r, float(prob), int(trials))
+            return Verified(m_obs, m_cat, r, float(prob), int(trials)), int(state[4])
         if state[4] != STOP_NONE:
             break
-    return None
+    return None, int(state[4])
 
 
 STATIC_CACHE_SIZE = 64

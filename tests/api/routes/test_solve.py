@@ -123,15 +123,16 @@ def test_real_tetra3_tiff(client: httpx.Client) -> None:
 
 
 def test_centroid_sigma_widens_the_search(client: httpx.Client, frames: list[SimFrame]) -> None:
-    """Centroids 5 px off (sigma) fail at the default 1 px and solve when the request says so."""
+    """Centroids 7 px off (sigma) fail at the default 1 px and solve when the request says so.
+    (At 5 px maxangle's triangles of fainter stars name this frame at 1 px since session 23.)"""
     frame = solvable(frames, 1)[0]
-    noisy = np.random.default_rng(5).normal(0.0, 5.0, frame.centroids.xy.shape) + frame.centroids.xy
+    noisy = np.random.default_rng(5).normal(0.0, 7.0, frame.centroids.xy.shape) + frame.centroids.xy
     body: dict[str, Any] = {"camera": "tetra3",
                             "centroids": np.column_stack([noisy, frame.centroids.flux]).tolist()}
     assert client.post("/v1/solve", json=body).json()["status"] == "no_solution"
-    result = client.post("/v1/solve", json={**body, "centroid_sigma_px": 5.0}).json()
+    result = client.post("/v1/solve", json={**body, "centroid_sigma_px": 7.0}).json()
     assert result["status"] == "solved"
-    assert angle_deg(result["quaternion"], frame.quaternion) < 0.5  # roll is loose at 5 px
+    assert angle_deg(result["quaternion"], frame.quaternion) < 0.5  # roll is loose at 7 px
     check_hips(result, frame)
     bad = client.post("/v1/solve", json={**body, "centroid_sigma_px": 0})
     assert bad.status_code == 422 and bad.json()["field"] == "centroid_sigma_px"

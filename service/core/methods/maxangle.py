@@ -317,12 +317,12 @@ EXTEND_STARS = 16
 """Where fewer of the brightest stars' triangles fit the table than their number (a wide field's
 brightest spread beyond ``d_max``), triangles of up to this many brightest stars that do fit
 follow them, up to that number (:func:`_triangles_extended`)."""
-EXTENSION_TRIALS = 250
+EXTENSION_TRIALS = 120
 """Hypotheses the triangles of :data:`EXTEND_STARS` may add to a search that the brightest
 stars' own left without an answer (none where they left a marginal one). Seeds 003-004 at
-0.75-1 mag of magnitude noise: the 14 frames of bench_peers they name took 24-227 in all.
-bench_wrong's 99,960 frames: 240 more identified at 250 (247 at 500, 272 unbounded); random
-points on seeds 003-004: 0.57 -> 0.83 ms median at 250 (0.90 at 500, 2.3 unbounded: ~4,500
+0.75-1 mag of magnitude noise: the 14 frames of bench_peers they name took 8-90. bench_wrong's
+99,960 frames: 232 more identified at 120 (240 at 250, 247 at 500, 272 unbounded); random points
+on seeds 003-004: 0.56-0.65 -> 0.68-0.80 ms median at 120 (~0.85 at 250, 2.3 unbounded: ~4,500
 hypotheses)."""
 _EXTENSIONS: dict[tuple[int, int], np.ndarray] = {}
 

@@ -54,11 +54,22 @@ class DatabasePlugin(WorkerPlugin):
             got = database_checksum(path)
             if got != self.checksum:
                 raise RuntimeError(f"its checksum {got[:12]} differs from the client's {self.checksum[:12]}")
-            warm_up(db)
+            once_more_on_system_error(lambda: warm_up(db))
         except Exception as exc:  # kept and raised by every task on this worker
             worker.skyfix_db_error = f"worker {worker.address}: cannot use the navigation database at {where}: {exc}"
             return
         worker.skyfix_db = db
+
+
+def once_more_on_system_error(step: Any) -> Any:
+    """``step()``, run a second time if the first raised ``SystemError``. CPython 3.11 can raise
+    a spurious "AST constructor recursion depth mismatch" in a threaded program (python/cpython
+    gh-106905): once in a CI run (session 23), while a worker thread's warm-up compiled the
+    kernels of a fresh install. A second ``SystemError`` is raised."""
+    try:
+        return step()
+    except SystemError:
+        return step()
 
 
 def _default_database_locked() -> Path:

@@ -264,7 +264,7 @@ class MaxAngleMatcher:
         if n < 3:
             return None
         tri_ext = _extension_array(n, len(obs))
-        v = np.ascontiguousarray(obs.vec[:max(n, int(tri_ext.max()) + 1 if len(tri_ext) else n)])
+        v = obs.vec[:max(n, min(len(obs), EXTEND_STARS))]  # the stars tri_ext may name
         eps = ctx.tol_rad
         labels, sides, theta, tol, n_first = _triangles_extended(v, n, _pattern_array(n), tri_ext, float(eps),
                                                                  self.d_max, self.xi)
@@ -279,7 +279,7 @@ class MaxAngleMatcher:
             return found
         # the extension's triangles (maxangle_search.search): at most EXTENSION_TRIALS more hypotheses
         limit = ver.trial_limit
-        ver.trial_limit = ver.trials + EXTENSION_TRIALS if limit is None else min(limit, ver.trials + EXTENSION_TRIALS)
+        ver.trial_limit = maxangle_search.extension_limit(ver.trials, limit, EXTENSION_TRIALS)
         try:
             return self._search_loop(ctx, labels, sides, theta, tol, eps, v, n_first, len(labels))
         finally:
@@ -353,10 +353,7 @@ def _triangles_extended(v: np.ndarray, n_tri: int, tri: np.ndarray, tri_ext: np.
     room = len(tri) - len(labels)
     if room <= 0 or len(tri_ext) == 0:
         return labels, sides, theta, tol, len(labels)
-    n_all = 0
-    for t in range(len(tri_ext)):
-        n_all = max(n_all, tri_ext[t, 0] + 1, tri_ext[t, 1] + 1, tri_ext[t, 2] + 1)
-    l2, s2, t2, o2 = _triangles_of(v[:n_all], tri_ext, eps, d_max, xi)
+    l2, s2, t2, o2 = _triangles_of(v[:min(len(v), EXTEND_STARS)], tri_ext, eps, d_max, xi)  # tri_ext's stars
     k = min(room, len(l2))
     n = len(labels)
     out_l = np.empty((n + k, 3), np.int64)

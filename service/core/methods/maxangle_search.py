@@ -185,11 +185,15 @@ def search(matcher: Any, ctx: SolveContext, labels: np.ndarray, sides: np.ndarra
     if found is not None or stop != STOP_NONE or len(ver.marginal) > held or n_first == len(labels) \
             or ctx.expired():
         return found
-    limit = ver.trials + extension_trials
-    if ver.trial_limit is not None:
-        limit = min(limit, ver.trial_limit)
     return _search(matcher, ctx, labels[n_first:], sides[n_first:], theta[n_first:], tol[n_first:], eps,
-                   max_candidates, limit)[0]
+                   max_candidates, extension_limit(ver.trials, ver.trial_limit, extension_trials))[0]
+
+
+def extension_limit(trials: int, trial_limit: int | None, extension_trials: int) -> int:
+    """The trial limit of the extension's triangles: ``extension_trials`` past ``trials``,
+    within the search's own ``trial_limit`` (None: none)."""
+    limit = trials + extension_trials
+    return limit if trial_limit is None else min(limit, trial_limit)
 
 
 def _search(matcher: Any, ctx: SolveContext, labels: np.ndarray, sides: np.ndarray, theta: np.ndarray,

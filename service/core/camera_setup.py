@@ -7,9 +7,12 @@ paid five hashes of the camera dataclass and five lookups: ~5 us of a ~50-us cle
 three times that when the processor's caches were cold (the benchmark alternates with tetra3rs;
 ``/work/s20/stamps_cold.py``). A :class:`CameraSetup` holds them all under one lookup by the
 identity of the camera and options objects, as a caller that reuses them (the SDK, ``solve``
-in a loop, ``bench_peers``) passes them; another object of equal value makes its own. With
-them in hand the first pass runs from the centroids as given
-(:func:`~.first_pass.frame_first_pass_kernel`): a frame it proves builds no observation.
+in a loop, ``bench_peers``) passes them, and then by their values, as the service and a replay
+build both anew for every request (~20-30 us a frame of seed 001 where the general set-up's
+value-keyed caches were asked one by one). With them in hand the first pass runs from the
+centroids as given (:func:`~.first_pass.frame_first_pass_kernel`): a frame it proves builds no
+observation. A camera seen for the first time gets its set-up before its first frame's search
+(``pipeline._first_sight``, since session 24), so that frame takes the same path as the rest.
 """
 
 from __future__ import annotations
@@ -47,21 +50,33 @@ class CameraSetup:
 
 
 def kept_setup(db: NavDatabase | NavDatabaseSet, camera: Camera, method: str, options: Any) -> CameraSetup | None:
-    """The setup kept for these very objects, or None."""
+    """The setup kept for these very objects, else for equal ones (a camera and options built
+    anew for each request of the same camera, as the service and a replay build them), or None."""
     got = db.__dict__.get("_camera_setups", _NONE).get((id(camera), id(options), method))
     if got is not None and got.camera is camera and got.options is options:
         return got
-    return None
+    try:
+        return db.__dict__.get("_camera_setups_by_value", _NONE).get((camera, options, method))
+    except TypeError:  # options holding an unhashable value (an array given in-process)
+        return None
 
 
 def keep_setup(db: NavDatabase | NavDatabaseSet, setup: CameraSetup) -> None:
-    """Keep ``setup`` on ``db`` (it holds its camera and options, so their ids stay theirs)."""
+    """Keep ``setup`` on ``db``, found by the identity of its camera and options (it holds
+    them, so their ids stay theirs) and by their values."""
     kept = db.__dict__.setdefault("_camera_setups", {})
+    by_value = db.__dict__.setdefault("_camera_setups_by_value", {})
     if len(kept) >= SETUPS_KEPT:
         kept.clear()
+    if len(by_value) >= SETUPS_KEPT:
+        by_value.clear()
     kept[(id(setup.camera), id(setup.options), setup.method)] = setup
+    try:
+        by_value[(setup.camera, setup.options, setup.method)] = setup
+    except TypeError:
+        pass
 
 
-_NONE: dict[tuple[int, int, str], CameraSetup] = {}
+_NONE: dict[Any, CameraSetup] = {}
 
 __all__ = ["SETUPS_KEPT", "SETUP_SIZES_KEPT", "CameraSetup", "keep_setup", "kept_setup"]

@@ -43,7 +43,7 @@ from .plan import fallback_next, search_plan
 from .refusal import SPARSE_ADVICE_STARS, no_solution, refusal, sparse_advice
 from .solution import solution_of
 from .types import Centroids, Solution
-from .verify import Observation, Verified, Verifier, _image_probes
+from .verify import Observation, Verified, Verifier, camera_probes
 from .wcs import tan_wcs
 
 Quaternion = Sequence[float]
@@ -220,6 +220,10 @@ def solve_rig(
         if refused is not None:
             return refused
         _ensure_warm(db)  # one-off per opened database; not charged to this frame's time limit
+        if one and len(frames[0][0]) >= 3:
+            # a camera seen for the first time: its set-up now, so this frame takes the path of
+            # the camera's later frames (no Observation where the first pass proves it)
+            setup = _first_sight(db, frames[0][1], method, options, plan, deepest)
     t0 = time.perf_counter()
     mountings = _mountings or [np.eye(3) if m is None else quat_to_matrix(np.asarray(m, float)) for _, _, m in frames]
     fp: FirstPass | None = None
@@ -263,11 +267,6 @@ def solve_rig(
     if COMPILED_FIRST_PASS and plain and quad_first and len(obs.cameras) == 1 and len(obs) >= 5:
         # auto's first pass in one compiled call (service.core.first_pass); a frame it does not
         # prove goes on below with the search's result in hand (QuadMatcher takes it up)
-        if setup is None and one and not obs.cameras[0].distortion:
-            setup = CameraSetup(frames[0][1], options, method, plan, deepest,
-                                _static_args(plan[0][0], deepest, obs.cameras[0], sigmas[0], options.match_radius_px,
-                                             options.max_false_prob), _image_probes(obs))
-            keep_setup(db, setup)
         if fp is None:
             fp = first_pass(obs, plan[0][0], deepest, sigmas[0], options.match_radius_px, options.max_false_prob,
                             None if setup is None else setup.static)
@@ -389,6 +388,21 @@ def _identify(
         if found is not None:
             return found, name, verifier.trials
     return None, used, verifier.trials
+
+
+def _first_sight(db: NavDatabase | NavDatabaseSet, camera: Camera, method: str, options: SolveOptions,
+                 plan: list[tuple[NavDatabase, list[str]]], deepest: NavDatabase) -> CameraSetup | None:
+    """The :class:`~.camera_setup.CameraSetup` of a camera seen for the first time (kept on
+    ``db``), or None where ``auto``'s compiled first pass does not apply: a distorted camera,
+    an epoch or observer velocity to correct for, a plan that does not start with ``quad``."""
+    if (not COMPILED_FIRST_PASS or camera.distortion or options.epoch is not None
+            or options.observer_velocity_km_s is not None or not plan or plan[0][1][:1] != ["quad"]):
+        return None
+    setup = CameraSetup(camera, options, method, plan, deepest,
+                        _static_args(plan[0][0], deepest, camera, options.centroid_sigma_px, options.match_radius_px,
+                                     options.max_false_prob), camera_probes(camera, IDENTITY_MOUNTING))
+    keep_setup(db, setup)
+    return setup
 
 
 def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: list[np.ndarray]) -> Observation:

@@ -34,7 +34,7 @@ SCRIPT = f"""
 import importlib, json
 import numpy as np
 from service.core.navdb import ensure_default_database, open_database
-from service.core.pipeline import SolveOptions, solve
+from service.core.pipeline import SolveOptions, solve, solve_rig
 from service.core.warmup import warm_up
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, random_points, simulate_frames
@@ -46,7 +46,8 @@ for key in ("seed000", "seed001", "seed002"):
     options = SolveOptions(centroid_sigma_px=1.0)  # one object: the camera's set-up is kept (camera_setup)
     for f in simulate_frames(p.camera, 15, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0, false_stars=2), rng=4):
         solve(f.centroids, p.camera, db, options=options)
-        solve(f.centroids, p.camera, db, options=SolveOptions(centroid_sigma_px=1.0))  # another: the general set-up
+        solve(f.centroids, p.camera, db, options=SolveOptions(centroid_sigma_px=1.0))  # equal: the same set-up
+        solve_rig([(f.centroids, p.camera, None)], db, options=options)  # a one-camera rig: the general path
     solve(random_points(p.camera, 25, 1), p.camera, db)
 out = {{}}
 for module, names in {KERNELS!r}.items():

@@ -170,24 +170,57 @@ def _solved(ints: np.ndarray, floats: np.ndarray, db: NavDatabase) -> FirstPass:
 STATIC_CACHE_SIZE = 64
 
 
+class _MemberArrays(NamedTuple):
+    """The first pass's arguments that depend on the two members alone (none on the camera or
+    the options), gathered once per member pair: a camera seen for the first time (each real
+    image brings its own) then costs its own numbers and a few tuple joins, not a dozen
+    lookups."""
+
+    deepest: NavDatabase
+    star_vec: np.ndarray
+    deep: tuple[Any, ...]
+    """has_deep, the deeper member's rows of this member's stars and its star vectors."""
+    mags: tuple[np.ndarray, np.ndarray]
+    ids: tuple[Any, ...]
+    """Both members' HIP numbers and hidden neighbours, in the kernel's order."""
+
+
+def _member_arrays(member: NavDatabase, deepest: NavDatabase) -> _MemberArrays:
+    """:class:`_MemberArrays` for ``member`` refined against ``deepest`` (kept on ``member``)."""
+    kept = member.__dict__.setdefault("_first_pass_arrays", {})
+    got = kept.get(id(deepest))
+    if got is not None and got.deepest is deepest:
+        return got
+    has_deep = deepest is not member
+    deep = deeper_arrays(member, deepest) if has_deep else _NO_DEEPER
+    got = kept[id(deepest)] = _MemberArrays(
+        deepest, star_vec64(member), (has_deep, deep.rows, deep.star_vec), (star_mags(member), star_mags(deepest)),
+        (star_hips(member), star_hips(deepest), *hidden_neighbours(member), *hidden_neighbours(deepest)))
+    return got
+
+
 def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: float,
                  match_radius_px: float | None, max_false_prob: float) -> tuple[Any, ...]:
     """The kernel's arguments that depend only on the databases, the camera and the options,
     kept per member (every frame of a camera passes the same; building them costs ~5 us)."""
-    key = (id(deepest), cam.diagonal_fov_deg, cam.pixel_scale_rad, sigma_px, match_radius_px, max_false_prob)
+    scale = cam.pixel_scale_rad
+    diagonal = cam.diagonal_fov_deg
+    key = (id(deepest), diagonal, scale, sigma_px, match_radius_px, max_false_prob)
     cache = member.__dict__.setdefault("_first_pass_args", {})
     got = cache.get(key)
     if got is not None and got[0] is deepest:
         return got[1]
     qm: QuadMatcher = get_matcher(member, "quad")
-    settle = _settle_args(member, deepest, cam, sigma_px, match_radius_px, max_false_prob)
-    star_vec, near_chord, radius, scale = settle[:4]
-    near = field_grid(member, cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG).kernel_args()
+    settle = _settle_from(member, deepest, _member_arrays(member, deepest), diagonal, scale, sigma_px,
+                          match_radius_px, max_false_prob)
+    star_vec, near_chord, radius = settle[:3]
+    near = field_grid(member, diagonal / 2 + NEAR_MARGIN_DEG).kernel_args()
     tol = (3.0 * math.sqrt(2.0) * sigma_px + 0.5) * scale
-    static = (QUERY_STARS, tol, qm.patterns, qm.table, qm.spill, qm.ratio_bin, qm.edge_bin, qm.edge_max, star_vec,
-              *qm.screen, *near, near_chord, radius, scale, float(max_false_prob),
-              float(Verifier.strong_false_prob), int(Verifier.confirm_patterns), int(Verifier.screen_stars),
-              MAX_PROBES, MAX_CHECKS, *settle[4:-1], 3.0 * radius * scale, settle[-1])
+    static = ((QUERY_STARS, tol, qm.patterns, qm.table, qm.spill, qm.ratio_bin, qm.edge_bin, qm.edge_max, star_vec)
+              + tuple(qm.screen) + near
+              + (near_chord, radius, scale, float(max_false_prob), float(Verifier.strong_false_prob),
+                 int(Verifier.confirm_patterns), int(Verifier.screen_stars), MAX_PROBES, MAX_CHECKS)
+              + settle[4:-1] + (3.0 * radius * scale, settle[-1]))
     if len(cache) >= STATIC_CACHE_SIZE:
         cache.clear()
     cache[key] = (deepest, static)
@@ -199,31 +232,37 @@ def _settle_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
     """:func:`settle_kernel`'s arguments from ``star_vec`` on (the member's, the deepest's and the
     options'), kept per member as :func:`_static_args` keeps its own."""
     scale = cam.pixel_scale_rad
-    key = (id(deepest), cam.diagonal_fov_deg, scale, sigma_px, match_radius_px, max_false_prob)
+    diagonal = cam.diagonal_fov_deg
+    key = (id(deepest), diagonal, scale, sigma_px, match_radius_px, max_false_prob)
     cache = member.__dict__.setdefault("_settle_args", {})
     got = cache.get(key)
     if got is not None and got[0] is deepest:
         return got[1]
-    radius = match_radius_px or max(2.5, 3.0 * sigma_px)
-    sigma_rad = sigma_px * scale
-    answer_radius = match_radius_px or max(2.5, 3.0 * sigma_rad / scale)  # as finish.solution has it
-    near_deg = cam.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
-    field_deg = cam.diagonal_fov_deg / 2 + FIELD_MARGIN_DEG
-    near_chord = 2 * math.sin(math.radians(near_deg) / 2)
-    field_chord = 2 * math.sin(math.radians(field_deg) / 2)
-    has_deep = deepest is not member
-    deep = deeper_arrays(member, deepest) if has_deep else _NO_DEEPER
-    deep_near = field_grid(deepest, near_deg).kernel_args() if has_deep else _NO_GRID
-    strong = min(max_false_prob, Verifier.strong_false_prob)
-    args = (star_vec64(member), near_chord, float(radius), float(scale), has_deep, deep.rows, deep.star_vec,
-            *deep_near, float(strong), *field_grid(member, field_deg).kernel_args(), star_mags(member),
-            star_mags(deepest), field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF,
-            star_hips(member), star_hips(deepest), *hidden_neighbours(member), *hidden_neighbours(deepest),
-            SUSPECT_SIGMA * max(float(sigma_px), MIN_SIGMA_PX))
+    args = _settle_from(member, deepest, _member_arrays(member, deepest), diagonal, scale, sigma_px,
+                        match_radius_px, max_false_prob)
     if len(cache) >= STATIC_CACHE_SIZE:
         cache.clear()
     cache[key] = (deepest, args)
     return args
+
+
+def _settle_from(member: NavDatabase, deepest: NavDatabase, arrays: _MemberArrays, diagonal: float, scale: float,
+                 sigma_px: float, match_radius_px: float | None, max_false_prob: float) -> tuple[Any, ...]:
+    """:func:`_settle_args`' tuple, made anew for a camera of this diagonal (deg) and pixel
+    scale (rad)."""
+    radius = match_radius_px or max(2.5, 3.0 * sigma_px)
+    sigma_rad = sigma_px * scale
+    answer_radius = match_radius_px or max(2.5, 3.0 * sigma_rad / scale)  # as finish.solution has it
+    near_deg = diagonal / 2 + NEAR_MARGIN_DEG
+    field_deg = diagonal / 2 + FIELD_MARGIN_DEG
+    near_chord = 2 * math.sin(math.radians(near_deg) / 2)
+    field_chord = 2 * math.sin(math.radians(field_deg) / 2)
+    deep_near = field_grid(deepest, near_deg).kernel_args() if arrays.deep[0] else _NO_GRID
+    strong = min(max_false_prob, Verifier.strong_false_prob)
+    return ((arrays.star_vec, near_chord, float(radius), float(scale)) + arrays.deep + deep_near + (float(strong),)
+            + field_grid(member, field_deg).kernel_args() + arrays.mags
+            + (field_chord, float(answer_radius), float(sigma_px), float(sigma_rad), PRIOR_DOF) + arrays.ids
+            + (SUSPECT_SIGMA * max(float(sigma_px), MIN_SIGMA_PX),))
 
 
 def settle(obs: Observation, member: NavDatabase, deepest: NavDatabase, found: Verified, sigma_px: float,

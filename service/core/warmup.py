@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import mmap
 import sys
+from functools import partial
 
 import numpy as np
 
@@ -76,31 +77,46 @@ def _mapping_of(a: np.ndarray) -> mmap.mmap | None:
     return None
 
 
-def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
+def warm_up(db: NavDatabase | NavDatabaseSet, *, reverse: bool = False) -> None:
     """Map the pages of ``db``'s arrays (:func:`map_pages`), build every matcher, the star k-d
     tree and sky grid of ``db`` (or of each member of a set), and solve one frame of its own
     stars with each method, so that numba's kernels are compiled (or loaded from its on-disk
-    cache) and the first request of a server worker is as fast as the rest."""
+    cache) and the first request of a server worker is as fast as the rest.
+
+    ``reverse``: the steps in the opposite order. A second process warming up the same database
+    on a fresh install compiles the kernels the first one reaches last, and each loads the
+    other's from numba's cache (``.ci/run``: ~3 min of compiling on one core of a 2-core VM)."""
     db.__dict__["_warm"] = True
     map_pages(db)
-    members = db.members.values() if isinstance(db, NavDatabaseSet) else [db]
+    members = list(db.members.values()) if isinstance(db, NavDatabaseSet) else [db]
     for member in members:
         member.__dict__["_warm"] = True
-        star_tree(member)
-        sky_grid(member)
-        camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
-        for name in member.methods:
-            get_matcher(member, name)
-            if name == "multifov":
-                continue  # a rig method; its kernels are the verifier's, warmed by the others
-            for centroids in own_frames(member, camera):
-                if solve(centroids, camera, member, method=name).status is SolveStatus.SOLVED:
-                    break
-    # auto as users call it, on the whole database: the compiled first pass, the kernels of
-    # frames of 4 and 3 stars (the screen of a 4-star triangle, the sparse proof) and of a frame
-    # the first pass cannot prove (quad's search on the other members, the fallback). Without
-    # these the first such requests compiled them on a fresh install: 4 s, 0.7 s, 1.7 s and 3 s,
-    # past the 500 ms time limit.
+    steps = [*(partial(_methods, member) for member in members), partial(_auto, db, members),
+             partial(_rigs, db, members), partial(_screens, members)]
+    for step in reversed(steps) if reverse else steps:
+        step()
+
+
+def _methods(member: NavDatabase) -> None:
+    """Every matcher of ``member``, its k-d tree and sky grid, and a frame solved by each method."""
+    star_tree(member)
+    sky_grid(member)
+    camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
+    for name in member.methods:
+        get_matcher(member, name)
+        if name == "multifov":
+            continue  # a rig method; its kernels are the verifier's, warmed by the others
+        for centroids in own_frames(member, camera):
+            if solve(centroids, camera, member, method=name).status is SolveStatus.SOLVED:
+                break
+
+
+def _auto(db: NavDatabase | NavDatabaseSet, members: list[NavDatabase]) -> None:
+    """``auto`` as users call it, on the whole database: the compiled first pass, the kernels of
+    frames of 4 and 3 stars (the screen of a 4-star triangle, the sparse proof) and of a frame
+    the first pass cannot prove (quad's search on the other members, the fallback). Without
+    these the first such requests compiled them on a fresh install: 4 s, 0.7 s, 1.7 s and 3 s,
+    past the 500 ms time limit."""
     rng = np.random.default_rng(0)
     for member in members:
         camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
@@ -109,8 +125,11 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
             solve(Centroids(frame.xy[:n], frame.flux[:n]), camera, db)
         solve(Centroids(rng.uniform(0, 1023, (12, 2)), rng.uniform(1, 100, 12)), camera, db)
         solve(Centroids(rng.uniform(0, 1023, (8, 2)), rng.uniform(1, 100, 8)), camera, db)  # the compiled fallbacks
-    # rigs: the rig method's own kernels (its master votes, the cross-camera proof of a sparse
-    # frame) on a frame of a member's stars dealt out to two cameras of one pointing
+
+
+def _rigs(db: NavDatabase | NavDatabaseSet, members: list[NavDatabase]) -> None:
+    """The rig method's own kernels (its master votes, the cross-camera proof of a sparse frame)
+    on a frame of a member's stars dealt out to two cameras of one pointing."""
     for member in members:
         if RIG_METHOD in member.methods:
             camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
@@ -119,6 +138,10 @@ def warm_up(db: NavDatabase | NavDatabaseSet) -> None:
             for n in (len(frame), 4):
                 halves = [Centroids(frame.xy[k:n:2], frame.flux[k:n:2]) for k in (0, 1)]
                 solve_rig([(h, camera, ident) for h in halves], db)
+
+
+def _screens(members: list[NavDatabase]) -> None:
+    """What only some frames reach, and the indexes a camera's first frame would build."""
     # the unique-triangle proof's box screens, which only a frame whose match proves locally
     # reaches: called directly on a member's own 3- and 4-star frame (a first use compiled
     # them inside a request: ~0.7-1 s)

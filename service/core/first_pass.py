@@ -211,8 +211,7 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
     if got is not None and got[0] is deepest:
         return got[1]
     qm: QuadMatcher = get_matcher(member, "quad")
-    settle = _settle_from(member, deepest, _member_arrays(member, deepest), diagonal, scale, sigma_px,
-                          match_radius_px, max_false_prob)
+    settle = _settle_args(member, deepest, cam, sigma_px, match_radius_px, max_false_prob)
     star_vec, near_chord, radius = settle[:3]
     near = field_grid(member, diagonal / 2 + NEAR_MARGIN_DEG).kernel_args()
     tol = (3.0 * math.sqrt(2.0) * sigma_px + 0.5) * scale

@@ -268,8 +268,7 @@ def solve_rig(
         # auto's first pass in one compiled call (service.core.first_pass); a frame it does not
         # prove goes on below with the search's result in hand (QuadMatcher takes it up)
         if fp is None:
-            fp = first_pass(obs, plan[0][0], deepest, sigmas[0], options.match_radius_px, options.max_false_prob,
-                            None if setup is None else setup.static)
+            fp = first_pass(obs, plan[0][0], deepest, sigmas[0], options.match_radius_px, options.max_false_prob)
         if fp.solved:
             t2 = time.perf_counter()
             timings["identify"] = (t2 - t1) * 1e3

@@ -24,8 +24,8 @@ from .camera import Camera
 from .errors import InvalidInputError, SkyfixError
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .pipeline import DEFAULT_OPTIONS, SolveOptions, solve, solve_rig
-from .warmup import warm_up
 from .types import Centroids, Solution
+from .warmup import warm_up
 
 
 @dataclass(frozen=True, slots=True)

@@ -15,6 +15,7 @@ from .navdb.reader import NavDatabase
 from .types import MatchedStars, Solution, SolveStatus
 from .verify import Observation
 
+
 def star_hips(db: NavDatabase) -> np.ndarray:
     """The star table's HIP numbers in memory (once per opened database; indexing the
     memory map costs more)."""

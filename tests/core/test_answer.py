@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from service.core.answer import compiled_checks, recheck
-from service.core.navdb import NavDatabase
 from service.core.finish import checked_pairs
+from service.core.navdb import NavDatabase
 from service.core.pipeline import _observation
 from service.core.sim import SimConfig, simulate_frames
 from service.core.verify import Verified, Verifier

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
+from service.core.camera import Camera
 from service.core.errors import InvalidInputError, UnknownMethodError
 from service.core.evaluate import score
 from service.core.methods import maxangle, method_names
 from service.core.pipeline import SolveOptions, solve
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, random_points, simulate_frames
-from service.core.camera import Camera
 from service.core.types import Centroids, NoSolutionReason
 from tests.conftest import SEED000_CAMERA
 

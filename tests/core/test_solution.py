@@ -6,7 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from service.core.attitude import matrix_from_radec_roll, matrix_to_quat, quat_to_matrix, radec_roll, random_rotations
+from service.core.attitude import (
+    matrix_from_radec_roll,
+    matrix_to_quat,
+    quat_to_matrix,
+    radec_roll,
+    random_rotations,
+)
 from service.core.solution import CAMERA_SHIFT, answer_columns, solution_of
 
 

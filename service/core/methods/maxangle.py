@@ -36,9 +36,9 @@ from ..catalog import StarTable
 from ..geometry import pairwise_angles_kernel
 from ..navdb.reader import NavDatabase
 from ..verify import Verified
+from . import maxangle_search
 from ._bucket_sort import sort_by_bucket_key
 from ._pairs import build_pair_table, pattern_order
-from . import maxangle_search
 from .base import Progress, SolveContext
 from .maxangle_index import (
     LAYOUTS,

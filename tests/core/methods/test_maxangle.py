@@ -4,18 +4,17 @@ layouts (service/core/methods/maxangle_index.py)."""
 from __future__ import annotations
 
 import math
-
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from service.core.screen import triple_product
 from service.core.geometry import pairwise_angles
 from service.core.methods import get_matcher
 from service.core.methods.maxangle_index import THETA_LO, THETA_SPAN
 from service.core.navdb import NavDatabase, build_database, open_database
 from service.core.pipeline import _observation
+from service.core.screen import triple_product
 from service.core.sim import SimConfig, simulate_frames
 from tests.conftest import SEED000_CAMERA, seed000_config
 

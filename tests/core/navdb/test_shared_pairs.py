@@ -25,8 +25,8 @@ from service.core.navdb import (
     ensure_default_database,
     open_database,
 )
-from service.core.navdb.format import SCHEMA_VERSION
 from service.core.navdb.default import DEFAULT_REVISION
+from service.core.navdb.format import SCHEMA_VERSION
 from service.core.pipeline import SolveOptions
 from service.core.sim import SimConfig, simulate_frames
 from tests.conftest import SEED000_CAMERA, seed000_config

@@ -114,3 +114,23 @@ def test_brightest_first_orders_and_projects_as_numpy() -> None:
     np.testing.assert_array_equal(xy_sorted, xy[want])
     np.testing.assert_array_equal(flux_sorted, flux[want])
     np.testing.assert_allclose(vec, cam.pixel_to_vector(xy[want]), atol=1e-15)
+
+
+def test_a_camera_keeps_its_hash_and_a_copy_or_a_pickle_makes_its_own() -> None:
+    """The hash is kept on the camera once asked (it keys the first sight's caches), equal
+    cameras hash alike, and neither equality nor the repr sees it; a pickled or replaced camera
+    starts afresh (``hash(None)`` differs between processes)."""
+    import copy
+    import dataclasses
+    import pickle
+
+    cam = Camera.from_fov(10.0, 1024, 768, distortion=(0.01, 0.0, 0.0, 0.0))
+    twin = Camera.from_fov(10.0, 1024, 768, distortion=(0.01, 0.0, 0.0, 0.0))
+    assert hash(cam) == hash(twin) == hash(cam) and cam == twin and {cam: 1}[twin] == 1
+    assert cam._hash == hash(cam) and twin._hash == hash(cam)
+    assert "_hash" not in repr(cam) and "_hash" not in Camera.__match_args__
+    for other in (pickle.loads(pickle.dumps(cam)), copy.copy(cam), copy.deepcopy(cam)):
+        assert other._hash == 0 and other == cam and hash(other) == hash(cam)
+    moved = dataclasses.replace(cam, f_px=cam.f_px * 2)
+    assert moved._hash == 0 and moved != cam and hash(moved) != hash(cam)
+    assert dataclasses.replace(moved, f_px=cam.f_px) == cam

@@ -20,8 +20,9 @@ def search_plan(db: NavDatabase | NavDatabaseSet, cameras: list[Camera], method:
     asks the same (choosing them costs ~30 us a frame)."""
     key = (method, sigma_px, tuple(cameras))  # cameras are hashable values: a camera's fields fix its plan
     cache = db.__dict__.setdefault("_plans", {})
-    if key in cache:
-        return cache[key]
+    got = cache.get(key)
+    if got is not None:
+        return got
     # a camera seen for the first time (each real image brings its own) most often shares its
     # plan with one seen before: kept by what the plan depends on (~5 us against ~20 to choose)
     shape = _plan_shape(db, cameras, method, sigma_px)
@@ -44,15 +45,20 @@ def _plan_shape(db: NavDatabase | NavDatabaseSet, cameras: list[Camera], method:
     fit the widest camera, whether the field is wide and the error large (``resolve``'s order),
     rig or not, and which members' ``maxangle`` tables hold the first camera's diagonal
     (:func:`covered_fallbacks`)."""
+    diagonal = cameras[0].diagonal_fov_deg
+    if len(cameras) == 1:  # every solve() frame: each field once (~2 us of a first sight's ~6)
+        fov = widest_fov = cameras[0].fov_deg
+        widest_diagonal = diagonal
+    else:
+        widest = max(cameras, key=lambda c: c.diagonal_fov_deg)
+        widest_fov, widest_diagonal = widest.fov_deg, widest.diagonal_fov_deg
+        fov = max(cam.fov_deg for cam in cameras)
     fitting: tuple[int, ...] = ()
     if isinstance(db, NavDatabaseSet):
-        widest = max(cameras, key=lambda c: c.diagonal_fov_deg)
-        fitting = tuple(id(m) for m in db.for_camera(widest.fov_deg, widest.diagonal_fov_deg))
-    wide = max(cam.fov_deg for cam in cameras) >= WIDE_FIELD_DEG
+        fitting = tuple(map(id, db.for_camera(widest_fov, widest_diagonal)))
     noisy = sigma_px is None or sigma_px >= WIDE_NOISY_PX
-    diagonal = cameras[0].diagonal_fov_deg
-    covered = tuple(diagonal <= reach for reach in _reaches(db))
-    return method, len(cameras) > 1, fitting, wide, noisy, covered
+    covered = tuple([diagonal <= reach for reach in _reaches(db)])
+    return method, len(cameras) > 1, fitting, fov >= WIDE_FIELD_DEG, noisy, covered
 
 
 def _reaches(db: NavDatabase | NavDatabaseSet) -> tuple[float, ...]:

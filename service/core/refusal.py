@@ -14,7 +14,6 @@ from .methods.capability import FAILURE_HINTS, cannot_serve, refusal_message, se
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .types import Centroids, NoSolutionReason, Solution, SolveStatus
 
-
 OUTSIDE_FACTOR = 2.0
 """A camera is outside a database (refused at once) when no member has both ``fov_min_deg /
 OUTSIDE_FACTOR`` <= the camera's side and its diagonal <= ``fov_max_deg * OUTSIDE_FACTOR``. Within
@@ -29,11 +28,12 @@ def refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavDatabase 
     (a few microseconds): fewer than 3 stars, a camera outside every member's range (see
     ``OUTSIDE_FACTOR``), or, given the declared centroid error ``sigma_px``, a named method
     that cannot serve the camera (:func:`method_refusal`). None if the frame is worth searching."""
-    n = sum(len(c) for c, _, _ in frames)
+    one = len(frames) == 1  # solve()'s frame: no generators (~1 us of a first sight's ~5)
+    n = len(frames[0][0]) if one else sum(len(c) for c, _, _ in frames)
     if n < 3:
         return _refused(NoSolutionReason.TOO_FEW_STARS, method, t0,
                         f"{n} star(s) given; identification needs at least 3")
-    cameras = tuple(cam for _, cam, _ in frames)
+    cameras = (frames[0][1],) if one else tuple(cam for _, cam, _ in frames)
     key = (method, sigma_px, cameras)
     decided = db.__dict__.setdefault("_camera_refusals", {})
     got = decided.get(key, _UNDECIDED)
@@ -52,16 +52,23 @@ def _camera_refusal(frames: Sequence[tuple[Centroids, Camera, object]], db: NavD
                     method: str, sigma_px: float | None) -> tuple[NoSolutionReason, str] | None:
     """:func:`refusal`'s decision for a frame's cameras (its stars aside): the reason and the
     message, or None."""
-    diagonal = max(cam.diagonal_fov_deg for _, cam, _ in frames)
-    narrowest = min(min(cam.fov_deg, cam.fov_y_deg) for _, cam, _ in frames)
+    if len(frames) == 1:
+        cam = frames[0][1]
+        diagonal, narrowest = cam.diagonal_fov_deg, min(cam.fov_deg, cam.fov_y_deg)
+    else:
+        diagonal = max(cam.diagonal_fov_deg for _, cam, _ in frames)
+        narrowest = min(min(cam.fov_deg, cam.fov_y_deg) for _, cam, _ in frames)
     ranges = db.__dict__.get("_fov_ranges")
     if ranges is None:  # once per opened database
         members = list(db.members.values()) if isinstance(db, NavDatabaseSet) else [db]
         ranges = [(float(m.manifest["fov_min_deg"]), float(m.manifest["fov_max_deg"])) for m in members]
         db.__dict__["_fov_ranges"] = ranges
-    if any(narrowest >= lo / OUTSIDE_FACTOR and diagonal <= hi * OUTSIDE_FACTOR for lo, hi in ranges):
-        why = None if sigma_px is None else method_refusal([cam for _, cam, _ in frames], db, method, sigma_px)
-        return None if why is None else (NoSolutionReason.CAMERA_OUTSIDE_DATABASE, why)
+    for lo, hi in ranges:
+        if narrowest >= lo / OUTSIDE_FACTOR and diagonal <= hi * OUTSIDE_FACTOR:
+            if sigma_px is None or method == "auto":  # (method_refusal's None for auto)
+                return None
+            why = method_refusal([cam for _, cam, _ in frames], db, method, sigma_px)
+            return None if why is None else (NoSolutionReason.CAMERA_OUTSIDE_DATABASE, why)
     served = ", ".join(f"{lo:g}-{hi:g}" for lo, hi in ranges)
     why = (f"camera of {narrowest:.3g} deg side and {diagonal:.3g} deg diagonal is outside the database's range "
            f"(side >= fov_min, diagonal <= fov_max: {served} deg)")

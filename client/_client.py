@@ -157,6 +157,7 @@ class _BaseClient:
         attitude_hint: AttitudeHint | Mapping[str, Any] | None = None,
         epoch: float | None = None,
         observer_velocity_km_s: Sequence[float] | None = None,
+        fov_max_error_deg: float | None = None,
     ) -> SolveRequest:
         """Validate the arguments of a solve into a `SolveRequest` (raises on misuse)."""
         if isinstance(centroids, SolveRequest):
@@ -170,6 +171,7 @@ class _BaseClient:
             "attitude_hint": attitude_hint,
             "epoch": epoch,
             "observer_velocity_km_s": list(observer_velocity_km_s) if observer_velocity_km_s is not None else None,
+            "fov_max_error_deg": fov_max_error_deg,
         })
 
     def _solve_spec(self, request: SolveRequest) -> _RequestSpec:
@@ -308,18 +310,22 @@ class Client(_BaseClient):
         attitude_hint: AttitudeHint | Mapping[str, Any] | None = None,
         epoch: float | None = None,
         observer_velocity_km_s: Sequence[float] | None = None,
+        fov_max_error_deg: float | None = None,
     ) -> SolveResult:
         """Identify stars from centroids (``POST /v1/solve``).
 
         Give ``centroids`` (rows ``[x, y]`` or ``[x, y, flux]``, px) and ``camera`` (a
         `CameraSpec`, a dict, or the name of a camera configured on the server), or
         ``cameras`` for a rig, or a ready `SolveRequest` as the first argument.
+        ``fov_max_error_deg``: how far the camera's horizontal field may be off (deg); the server
+        then searches focal lengths and ``SolveResult.fov_deg`` is the one fitted.
         Returns a `SolveResult`: ``status`` is ``"solved"`` or ``"no_solution"``.
         Raises `SkyfixHTTPError` when the server refuses the request.
         """
         request = self.build_solve_request(centroids, camera, cameras=cameras, id=id, method=method,
                                            attitude_hint=attitude_hint, epoch=epoch,
-                                           observer_velocity_km_s=observer_velocity_km_s)
+                                           observer_velocity_km_s=observer_velocity_km_s,
+                                           fov_max_error_deg=fov_max_error_deg)
         return self._parse(self._send(self._solve_spec(request)), SolveResult)
 
     def solve_image(self, image: ImageLike, *, camera: CameraLike | None = None, fov_deg: float | None = None,
@@ -416,11 +422,13 @@ class AsyncClient(_BaseClient):
         attitude_hint: AttitudeHint | Mapping[str, Any] | None = None,
         epoch: float | None = None,
         observer_velocity_km_s: Sequence[float] | None = None,
+        fov_max_error_deg: float | None = None,
     ) -> SolveResult:
         """As `Client.solve`."""
         request = self.build_solve_request(centroids, camera, cameras=cameras, id=id, method=method,
                                            attitude_hint=attitude_hint, epoch=epoch,
-                                           observer_velocity_km_s=observer_velocity_km_s)
+                                           observer_velocity_km_s=observer_velocity_km_s,
+                                           fov_max_error_deg=fov_max_error_deg)
         return self._parse(await self._send(self._solve_spec(request)), SolveResult)
 
     async def solve_image(self, image: ImageLike, *, camera: CameraLike | None = None,

@@ -130,6 +130,14 @@ class SolveRequest(_Model):
         "arcsec) is applied to the catalogue directions before the attitude is fitted, so the quaternion is "
         "the camera's true inertial attitude. Each component within +-1000 km/s.",
     )
+    fov_max_error_deg: float | None = Field(
+        None, gt=0, le=30,
+        description="Single camera: how far the camera's horizontal field of view may be off, degrees. A frame "
+        "not identified with the camera as given is searched again over the focal lengths this allows, and the "
+        "answer is fitted with the focal length its stars say (the result's fov_deg). Each extra step is a test "
+        "of its own, accepted only below the coincidence bound divided by their number. None: the camera is "
+        "exact.",
+    )
     centroid_sigma_px: float | None = Field(
         None, gt=0, le=20,
         description="Expected centroid error per axis, px (default 1). Sets the pattern tolerance and the "
@@ -147,6 +155,8 @@ class SolveRequest(_Model):
                 raise ValueError("give camera and centroids, or cameras")
         elif self.centroids is not None or self.camera is not None:
             raise ValueError("give either camera + centroids or cameras, not both")
+        elif self.fov_max_error_deg is not None:
+            raise ValueError("fov_max_error_deg is for a single camera; calibrate a rig's cameras (skyfix calibrate)")
         return self
 
 
@@ -206,6 +216,10 @@ class SolveResult(BaseModel):
         "command that would serve the camera). Not a stable interface: parse `reason`."
     )
     timings_ms: dict[str, float] = Field(default_factory=dict, description="Per-stage wall time, ms.")
+    fov_deg: float | None = Field(
+        None, description="When the request gave fov_max_error_deg and the frame was identified: the horizontal "
+        "field of view (deg) of the focal length fitted to the identified stars, with which the answer was made."
+    )
     wcs: dict[str, float | str] | None = Field(
         None,
         description="Images only: FITS WCS (TAN) of the solution: CTYPE1/2, CRVAL1/2 (deg), CRPIX1/2 "

@@ -134,6 +134,8 @@ def frame_call(req: SolveRequest, db: NavDb, named: Mapping[str, CameraEntry], *
     prior = hint(req.attitude_hint) or track_hint
     if req.centroid_sigma_px is not None:
         options = replace(options, centroid_sigma_px=req.centroid_sigma_px)
+    if req.fov_max_error_deg is not None:
+        options = replace(options, fov_max_error_deg=req.fov_max_error_deg)
     if req.epoch is not None or req.observer_velocity_km_s is not None:
         velocity = req.observer_velocity_km_s
         options = replace(options, epoch=req.epoch,

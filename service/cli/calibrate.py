@@ -70,6 +70,10 @@ def calibrate_camera(
     sigma: Annotated[float, typer.Option(help="Expected centroid error of the nominal camera, px.")] = 1.0,
     threshold: Annotated[float, typer.Option(help="Detection threshold for images, local noise sigmas.")] = 5.0,
     report: Annotated[Path | None, typer.Option(help="Also write the fit's report (1-sigma, RMS, history).")] = None,
+    fov_max_error: Annotated[float | None, typer.Option(
+        min=0.0, max=30.0,
+        help="How far the nominal horizontal field may be off, deg: frames are identified over the focal lengths "
+        "this allows (a lens's nominal focal length is often 1-5% off).")] = None,
 ) -> None:
     """Fit focal length, principal point and distortion over many frames; write a camera that
     `skyfix solve`, `SKYFIX_CAMERAS` and the SDK accept."""
@@ -80,6 +84,8 @@ def calibrate_camera(
     from ..core.navdb import open_database
     from ..core.pipeline import SolveOptions
 
+    if fov_max_error is not None and not fov_max_error > 0:
+        raise typer.BadParameter("must be more than 0 deg", param_hint="--fov-max-error")
     names = tuple(p.strip() for p in fit.split(",") if p.strip())
     if not names or set(names) - set(PARAMS):
         raise typer.BadParameter(f"choose from {','.join(PARAMS)}", param_hint="--fit")
@@ -97,7 +103,8 @@ def calibrate_camera(
         nominal = Camera.from_spec(spec)
         database = open_database(resolve_db(db))
         result = calibrate(frames, nominal, database, fit=names, iterations=iterations, method=method,
-                           options=SolveOptions(centroid_sigma_px=sigma), progress=err_console.print)
+                           options=SolveOptions(centroid_sigma_px=sigma, fov_max_error_deg=fov_max_error),
+                           progress=err_console.print)
     except (OSError, SkyfixError, ValueError) as exc:
         err_console.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(2) from None

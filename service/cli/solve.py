@@ -30,12 +30,18 @@ def solve_frames(
     method: Annotated[str, typer.Option(help="Method name or 'auto'.")] = "auto",
     sigma: Annotated[float, typer.Option(help="Expected centroid error, px.")] = 1.0,
     workers: Annotated[int | None, typer.Option(min=1, help="Worker processes (default: all cores).")] = None,
+    fov_max_error: Annotated[float | None, typer.Option(
+        min=0.0, max=30.0,
+        help="How far the camera's horizontal field may be off, deg: a frame not identified with it is searched "
+        "over the focal lengths this allows, and `fov_deg` reports the one fitted.")] = None,
 ) -> None:
     """Print one JSON result per frame on stdout (in order), then a summary on stderr: the
     share identified, wrong answers against any truth, frames/s (reading, solving and writing,
     after the database is opened and warmed up), and no-solutions by reason."""
     import time
 
+    if fov_max_error is not None and not fov_max_error > 0:
+        raise typer.BadParameter("must be more than 0 deg", param_hint="--fov-max-error")
     from ..core.batch import FrameError, SolvePool
     from ..core.navdb import open_database
     from ..core.pipeline import SolveOptions
@@ -43,7 +49,7 @@ def solve_frames(
 
     database = open_database(resolve_db(db))
     warm_up(database)  # before the clock: frames/s below is of solving, not of starting
-    options = SolveOptions(centroid_sigma_px=sigma)
+    options = SolveOptions(centroid_sigma_px=sigma, fov_max_error_deg=fov_max_error)
     stream = sys.stdin if str(frames) == "-" else open(frames)
     pool = SolvePool(database, method=method, options=options, workers=workers, then=_answer, return_errors=True)
     n_workers = pool.workers  # default: the cores this process may use

@@ -19,8 +19,14 @@ def solve_image_files(
     method: Annotated[str, typer.Option(help="Method name or 'auto'.")] = "auto",
     sigma: Annotated[float, typer.Option(help="Expected centroid error, px.")] = 1.0,
     threshold: Annotated[float, typer.Option(help="Detection threshold, local noise sigmas.")] = 5.0,
+    fov_max_error: Annotated[float | None, typer.Option(
+        min=0.0, max=30.0,
+        help="How far the camera's horizontal field may be off, deg: a frame not identified with it is searched "
+        "over the focal lengths this allows, and `fov_deg` reports the one fitted.")] = None,
 ) -> None:
     """Print one JSON result per image (the `skyfix solve` schema plus `wcs`)."""
+    if fov_max_error is not None and not fov_max_error > 0:
+        raise typer.BadParameter("must be more than 0 deg", param_hint="--fov-max-error")
     from ..core.camera import Camera
     from ..core.centroid import load_image
     from ..core.errors import SkyfixError
@@ -39,7 +45,7 @@ def solve_image_files(
         try:
             img = load_image(path)
             cam = Camera.from_spec(spec) if spec else Camera.from_fov(fov, img.shape[1], img.shape[0])  # type: ignore[arg-type]
-            sol = solve_image(img, cam, database, method=method, options=SolveOptions(centroid_sigma_px=sigma),
+            sol = solve_image(img, cam, database, method=method, options=SolveOptions(centroid_sigma_px=sigma, fov_max_error_deg=fov_max_error),
                               detect={"sigma_threshold": threshold})
         except (OSError, SkyfixError) as exc:
             err_console.print(f"[red]{path}:[/red] {exc}")

@@ -82,11 +82,13 @@ class Calibration:
 @dataclass(frozen=True)
 class _Matched:
     """The identified stars of one frame: pixels ``(n, 2)``, ICRS unit vectors ``(n, 3)``, and
-    the frame's ICRS -> camera matrix."""
+    the frame's ICRS -> camera matrix; ``f_px`` the focal length (px) its answer was fitted with
+    when the solve searched focal lengths (``SolveOptions.fov_max_error_deg``), else None."""
 
     xy: np.ndarray
     ref: np.ndarray
     matrix: np.ndarray
+    f_px: float | None = None
 
 
 def _camera_vector(camera: Camera) -> np.ndarray:
@@ -121,8 +123,9 @@ def identify(frames: Sequence[Centroids], camera: Camera, db: Any, *, method: st
         idx = np.array([s.centroid for s in sol.stars])
         ra = np.radians([s.ra_deg for s in sol.stars])
         dec = np.radians([s.dec_deg for s in sol.stars])
+        f_px = None if sol.fov_deg is None else (camera.width / 2) / math.tan(math.radians(sol.fov_deg) / 2)
         out.append(_Matched(np.asarray(cents.xy)[idx], radec_to_vector(ra, dec),
-                            quat_to_matrix(np.asarray(sol.quaternion, dtype=np.float64))))
+                            quat_to_matrix(np.asarray(sol.quaternion, dtype=np.float64)), f_px))
     return out
 
 
@@ -202,6 +205,10 @@ def calibrate(
     iterations : int
         Identify-then-fit rounds at most (stops early once the camera moves by less than 0.1 of
         its 1-sigma).
+    options : SolveOptions, optional
+        The solves' options. With ``fov_max_error_deg`` a nominal focal length a few percent off
+        still identifies the frames (each searched over focal lengths), and the first fit starts
+        from the median of the focal lengths they fitted.
     """
     unknown = set(fit) - set(PARAMS)
     if unknown:
@@ -222,6 +229,11 @@ def calibrate(
         if it == 0:
             nominal_rms = _nominal_rms(matched, camera)
         before = _camera_vector(current)
+        searched = [m.f_px for m in matched if m.f_px is not None]
+        if it == 0 and searched and fit_mask[0]:
+            # a nominal camera of uncertain field (options.fov_max_error_deg): the fit starts from the
+            # frames' own fitted focal lengths, whose attitudes were fitted with them
+            before[0] = float(np.median(searched))
         vec, sigma, rms, _ = _fit(matched, before, fit_mask)
         current = _camera_from_vector(camera, vec)
         step = np.abs(vec - before)[fit_mask] / np.maximum(sigma[fit_mask], 1e-12)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -78,6 +78,12 @@ class SolveOptions:
         faint stars are often worse than assumed); the hypotheses of the first pass still count
         in the coincidence bound. The default 1 disables the retry: it doubles the cost of
         frames that have no answer.
+    fov_max_error_deg : float, optional
+        The camera's horizontal field of view may be off by up to this much (deg): a frame not
+        proven with the camera as given is searched again over the focal lengths that range
+        allows, and the answer is fitted with the focal length its stars say
+        (:mod:`service.core.fov_search`; ``Solution.fov_deg`` reports the field). One camera
+        only. None: the camera is exact.
     """
 
     centroid_sigma_px: float = 1.0
@@ -88,6 +94,7 @@ class SolveOptions:
     retry_sigma_factor: float = 1.0
     epoch: float | None = None
     observer_velocity_km_s: tuple[float, float, float] | None = None
+    fov_max_error_deg: float | None = None
 
 
 DEFAULT_OPTIONS = SolveOptions()
@@ -185,6 +192,10 @@ def solve(
     hint : (quaternion [w, x, y, z], radius_deg), optional
         Prior attitude; answers whose boresight lies farther than ``radius_deg`` are refused.
     """
+    if options.fov_max_error_deg is not None:  # a field known roughly: a search over focal lengths
+        from .fov_search import solve_uncertain_fov
+
+        return solve_uncertain_fov(centroids, camera, db, method=method, hint=hint, options=options)
     return solve_rig([(centroids, camera, None)], db, method=method, hint=hint, options=options,
                      _mountings=_ONE_CAMERA)
 
@@ -206,6 +217,9 @@ def solve_rig(
     """
     if not frames:
         raise InvalidInputError("cameras", "at least one camera frame is required")
+    if options.fov_max_error_deg is not None:
+        raise InvalidInputError("fov_max_error_deg", "a search over focal lengths is for one camera (solve); "
+                                "calibrate a rig's cameras (skyfix calibrate) instead")
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     given = db  # (``db`` names the member being searched below)
@@ -488,7 +502,9 @@ def solve_image(
     rows = np.column_stack([found.centroids.xy, found.centroids.flux]).round(3)
     object.__setattr__(sol, "detected", tuple((float(x), float(y), float(f)) for x, y, f in rows))
     if sol.solved and sol.quaternion is not None:
-        object.__setattr__(sol, "wcs", tan_wcs(quat_to_matrix(np.asarray(sol.quaternion)), camera))
+        fitted = camera if sol.fov_deg is None else replace(camera, f_px=(camera.width / 2) / math.tan(
+            math.radians(sol.fov_deg) / 2))  # (the focal length a search over them fitted)
+        object.__setattr__(sol, "wcs", tan_wcs(quat_to_matrix(np.asarray(sol.quaternion)), fitted))
     return sol
 
 

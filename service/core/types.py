@@ -220,6 +220,9 @@ class Solution:
     reason: NoSolutionReason | None = None
     methods_tried: tuple[str, ...] = ()
     message: str | None = None
+    fov_deg: float | None = None
+    """The horizontal field (deg) of the camera the answer was fitted with, when the solve searched
+    focal lengths (``SolveOptions.fov_max_error_deg``); None otherwise."""
 
     @property
     def solved(self) -> bool:
@@ -251,6 +254,7 @@ class Solution:
             "message": self.message,
             "timings_ms": {k: float(v) for k, v in self.timings_ms.items()},
             **({"wcs": self.wcs} if self.wcs is not None else {}),
+            **({"fov_deg": num(self.fov_deg)} if self.fov_deg is not None else {}),
             **({"n_detected": self.n_detected} if self.n_detected is not None else {}),
             **({"centroids": [list(c) for c in self.detected]} if self.detected is not None else {}),
         }

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -114,3 +115,25 @@ def test_solve_image_real_tiff(tmp_path: Path) -> None:
     assert abs(out["ra_deg"] - truth["ra_deg"]) < 0.1 and abs(out["dec_deg"] - truth["dec_deg"]) < 0.1
     bad = run("solve-image", str(tmp_path / "missing.png"), "--fov", "10", "--db", str(db), ok=False)
     assert bad.returncode == 2 and "missing.png" in bad.stderr
+
+
+def test_solve_with_fov_max_error_finds_a_camera_3_percent_off(tmp_path: Path) -> None:
+    """A recording whose camera's focal length is 3% off identifies almost nothing as given; with
+    `--fov-max-error` every answer comes with the field it fitted (default database)."""
+    rec = tmp_path / "frames.jsonl"
+    run("sim", "--out", str(rec), "--n", "6", "--noise", "0.5", "--seed", "4")
+    off = tmp_path / "off.jsonl"
+    rows = [json.loads(line) for line in rec.read_text().splitlines()]
+    for r in rows:
+        r["camera"]["focal_mm"] *= 1.03
+    off.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    plain = [json.loads(line) for line in run("solve", str(off), "--sigma", "0.5", "--workers", "1").stdout.splitlines()]
+    assert sum(r["status"] == "solved" for r in plain) <= 1
+    proc = run("solve", str(off), "--sigma", "0.5", "--fov-max-error", "0.5", "--workers", "1")
+    found = [json.loads(line) for line in proc.stdout.splitlines()]
+    assert sum(r["status"] == "solved" for r in found) >= 5 and "0 wrong" in proc.stderr
+    f_px = 94.9489 * 1000 / 14.0  # the simulated camera's own focal length (1024 px wide)
+    fov = math.degrees(2 * math.atan(512 / f_px))
+    assert all(abs(r["fov_deg"] / fov - 1) < 2e-3 for r in found if r["status"] == "solved"), found
+    bad = run("solve", str(off), "--fov-max-error", "0", ok=False)
+    assert bad.returncode == 2 and "--fov-max-error" in bad.stderr

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from client.models import CameraSpec
-from service.core.calibrate import PARAMS, calibrate
+from service.core.calibrate import PARAMS, calibrate, identify
 from service.core.camera import Camera
 from service.core.centroid import extract, load_image
 from service.core.pipeline import SolveOptions
@@ -44,6 +44,20 @@ def test_simulated_round_trip_recovers_the_camera_within_its_sigma(seed000_db) -
     assert cal.rms_px_nominal > 1.0
     assert cal.rms_px < 0.35
     assert cal.frames_solved >= 28
+
+
+def test_a_nominal_focal_length_5_percent_off_is_found_with_fov_max_error(default_set_db) -> None:
+    """A lens's nominal focal length is often a few percent off: as given almost no frame
+    identifies, so there is little to fit; with ``fov_max_error_deg`` every frame is searched over focal
+    lengths and the fit starts from theirs."""
+    nominal = Camera.from_focal(94.9489 * 1.05, 14.0, 1024, 1024)
+    frames = [f.centroids for f in simulate_frames(TRUTH, 20, SimConfig(mag_limit=6.5, centroid_noise_px=0.2), rng=3)]
+    as_given = identify(frames, nominal, default_set_db, options=SolveOptions(centroid_sigma_px=1.0))
+    assert sum(m is not None for m in as_given) <= 2
+    cal = calibrate(frames, nominal, default_set_db, options=SolveOptions(centroid_sigma_px=1.0, fov_max_error_deg=1.0))
+    assert cal.frames_solved >= 19
+    assert abs(cal.camera.f_px - TRUTH.f_px) < 3 * cal.sigma["f_px"] < 3.0
+    assert cal.rms_px < 0.35 < 5.0 < cal.rms_px_nominal
 
 
 @pytest.mark.real

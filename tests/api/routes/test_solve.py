@@ -170,3 +170,31 @@ def test_no_solution_carries_reason_and_methods_tried(client: httpx.Client, came
     result = SolveResult.model_validate(rand.json())
     assert result.reason in ("no_pattern_match", "not_proven") and result.methods_tried
     assert result.method == result.methods_tried[-1]
+
+
+def test_fov_max_error_finds_a_field_given_3_percent_off(client: httpx.Client, frames: list[SimFrame],
+                                                         camera: Camera) -> None:
+    """A camera spec whose field is 3% too wide identifies nothing as given; with
+    ``fov_max_error_deg`` the server searches focal lengths and reports the field it fitted. The
+    field is a single camera's: on a rig, or out of range, it is a 422 naming it."""
+    off = {"width": camera.width, "height": camera.height, "fov_deg": camera.fov_deg * 1.03}
+    solved = 0
+    for frame in solvable(frames, 4):
+        body: dict[str, Any] = {"camera": off, "centroids": rows(frame)}
+        assert client.post("/v1/solve", json=body).json()["status"] == "no_solution"
+        result = client.post("/v1/solve", json={**body, "fov_max_error_deg": 0.6}).json()
+        if result["status"] != "solved":
+            continue
+        solved += 1
+        check_hips(result, frame)
+        exact = client.post("/v1/solve", json={"camera": "tetra3", "centroids": rows(frame)}).json()
+        assert angle_deg(result["quaternion"], np.asarray(exact["quaternion"])) < 3e-3  # ~10": the same fit
+        assert abs(result["fov_deg"] / camera.fov_deg - 1) < 2e-3, result["fov_deg"]
+    assert solved >= 3
+    body = {"camera": off, "centroids": rows(solvable(frames, 1)[0])}
+    for bad in (0, -1, 31, "x"):
+        r = client.post("/v1/solve", json={**body, "fov_max_error_deg": bad})
+        assert r.status_code == 422 and "fov_max_error_deg" in r.text, (bad, r.text)
+    rig = {"cameras": [{"camera": "tetra3", "centroids": body["centroids"]}], "fov_max_error_deg": 0.5}
+    r = client.post("/v1/solve", json=rig)
+    assert r.status_code == 422 and "fov_max_error_deg" in r.text, r.text

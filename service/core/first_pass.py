@@ -211,7 +211,7 @@ def _static_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
     if got is not None and got[0] is deepest:
         return got[1]
     qm: QuadMatcher = get_matcher(member, "quad")
-    settle = _settle_args(member, deepest, cam, sigma_px, match_radius_px, max_false_prob)
+    settle = _settle_kept(member, deepest, key)
     star_vec, near_chord, radius = settle[:3]
     near = field_grid(member, diagonal / 2 + NEAR_MARGIN_DEG).kernel_args()
     tol = (3.0 * math.sqrt(2.0) * sigma_px + 0.5) * scale
@@ -230,15 +230,19 @@ def _settle_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
                  match_radius_px: float | None, max_false_prob: float) -> tuple[Any, ...]:
     """:func:`settle_kernel`'s arguments from ``star_vec`` on (the member's, the deepest's and the
     options'), kept per member as :func:`_static_args` keeps its own."""
-    scale = cam.pixel_scale_rad
-    diagonal = cam.diagonal_fov_deg
-    key = (id(deepest), diagonal, scale, sigma_px, match_radius_px, max_false_prob)
+    key = (id(deepest), cam.diagonal_fov_deg, cam.pixel_scale_rad, sigma_px, match_radius_px, max_false_prob)
+    return _settle_kept(member, deepest, key)
+
+
+def _settle_kept(member: NavDatabase, deepest: NavDatabase, key: tuple[Any, ...]) -> tuple[Any, ...]:
+    """:func:`_settle_args` by its key, ``(id(deepest), diagonal deg, pixel scale rad, sigma_px,
+    match_radius_px, max_false_prob)``: :func:`_static_args` has made it already (a camera seen
+    for the first time computed its field and scale twice, and the key)."""
     cache = member.__dict__.setdefault("_settle_args", {})
     got = cache.get(key)
     if got is not None and got[0] is deepest:
         return got[1]
-    args = _settle_from(member, deepest, _member_arrays(member, deepest), diagonal, scale, sigma_px,
-                        match_radius_px, max_false_prob)
+    args = _settle_from(member, deepest, _member_arrays(member, deepest), *key[1:])
     if len(cache) >= STATIC_CACHE_SIZE:
         cache.clear()
     cache[key] = (deepest, args)

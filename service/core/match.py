@@ -52,7 +52,11 @@ def _camera_rows(cameras: tuple[Any, ...]) -> tuple[np.ndarray, np.ndarray]:
     frame of a camera asks the same; the kernels only read them)."""
     got = _CAMERA_ROWS.get(cameras)
     if got is None:
-        cams = np.array([[c.f_px, c.cx, c.cy, c.width, c.height] for c in cameras], dtype=np.float64)
+        if len(cameras) == 1:  # solve()'s camera, seen for the first time: no nested lists
+            c = cameras[0]
+            cams = np.array((c.f_px, c.cx, c.cy, c.width, c.height), np.float64).reshape(1, 5)
+        else:
+            cams = np.array([[c.f_px, c.cx, c.cy, c.width, c.height] for c in cameras], dtype=np.float64)
         dist = np.zeros((len(cameras), 5))
         for i, c in enumerate(cameras):
             if c.distortion:

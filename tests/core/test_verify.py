@@ -267,3 +267,24 @@ def test_the_wide_screen_starts_from_the_checks_attitude(default_set_db, monkeyp
         assert len(sol.stars) == 5
     monkeypatch.setattr(Verifier, "_wide_hits", lambda self, *a: 0)
     assert not solve(f.centroids, p.camera, default_set_db, options=opts).solved
+
+
+def test_a_pinhole_cameras_probes_are_the_general_paths_bits() -> None:
+    """:func:`~service.core.verify.camera_probes` of a pinhole camera on the identity
+    mounting, by plain arithmetic, holds the very bits of ``pixel_to_vector(xy) @ mounting`` (an
+    identity mounting of its own takes that path), a writable C-ordered float64 array as the
+    kernels take it."""
+    from service.core.camera import Camera
+    from service.core.match import IDENTITY_MOUNTING
+    from service.core.verify import camera_probes
+
+    rng = np.random.default_rng(5)
+    for i in range(300):
+        w, h = int(rng.integers(1, 8000)), int(rng.integers(1, 8000))
+        shift = {} if i % 2 else {"cx": float(rng.uniform(-9, w + 9)), "cy": float(rng.uniform(-9, h + 9))}
+        cam = Camera.from_fov(float(rng.uniform(0.5, 150.0)), w, h, **shift)
+        fast, general = camera_probes(cam, IDENTITY_MOUNTING), camera_probes(cam, np.eye(3))
+        xy = np.array([[cam.cx, cam.cy], [-0.5, -0.5], [w - 0.5, -0.5], [-0.5, h - 0.5], [w - 0.5, h - 0.5]])
+        assert fast.tobytes() == general.tobytes() == (cam.pixel_to_vector(xy) @ np.eye(3)).tobytes()
+        assert fast.shape == (5, 3) and fast.dtype == np.float64
+        assert fast.flags.c_contiguous and fast.flags.writeable

@@ -139,6 +139,15 @@ without a proof, that member's first fallback runs before the next member's ``qu
 and ``maxangle`` on the first member proved 422). Its hypotheses do not count against the
 fallbacks' ``FEW_STARS_MAX_TRIALS``."""
 
+SPARSE_FRAME_ONE_MEMBER = True
+"""On a one-camera frame of 3-4 stars (too few for ``quad``), ``auto`` runs the fallbacks of the
+plan's first member that holds them, not a later member's as well. Seed 002's camera: the
+default set's ``narrow`` member's ``maxangle`` and ``pyramid`` after ``sparse``'s proved none of
+2,203 4-star and 994 3-star frames over the benchmark's grid (seeds 1-8 of bench_peers' 20
+points; a 4-star frame's bound allows one or two hypotheses on the deeper, denser member), at
+~0.11 ms of every 4-star frame that ``sparse`` leaves (``/work/s25/who.py``). The general loop
+(written as a flag so that a test can compare the two)."""
+
 SPARSE_PROOF_METHODS = frozenset({"triangle", "multifov"})
 """Methods that can prove a frame of fewer stars than the verifier's ``min_matches`` (4): the
 verifier needs a pair beyond the pattern, so only ``triangle``'s unique-triangle proof
@@ -309,9 +318,16 @@ def solve_rig(
         tried = ["quad", *chain.tried]
         if chain.member is not None:
             db = chain.member
+    one_fallback = (SPARSE_FRAME_ONE_MEMBER and method == "auto" and len(obs) < QUAD_MIN_STARS
+                    and len(obs.cameras) == 1)
     for sigma in sigmas if chain is None else ():
         order = list(plan)
+        fallen_back: NavDatabase | None = None  # the member whose fallbacks ran first on this frame
         for i, (member, methods) in enumerate(order):
+            if "quad" not in methods:
+                if one_fallback and fallen_back is not None and member is not fallen_back:
+                    continue  # a 3-4-star frame: the first member's fallbacks only (SPARSE_FRAME_ONE_MEMBER)
+                fallen_back = fallen_back or member
             if misses and all(misses) and "quad" not in methods:
                 methods = methods[:1]  # the first fallback alone (maxangle; see FEW_STARS_MAX_TRIALS)
                 if trial_limit is None:  # over every member's fallback

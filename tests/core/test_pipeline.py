@@ -312,3 +312,28 @@ def test_a_4_star_frame_is_not_given_to_quad_and_says_why_on_the_default_databas
                  options=SolveOptions(centroid_sigma_px=1.0))
     assert "quad" not in four.methods_tried and "maxangle" in four.methods_tried
     assert four.solved or four.reason is not NoSolutionReason.TOO_FEW_STARS
+
+
+def test_a_3_4_star_frame_runs_the_fallbacks_of_one_member(default_set_db, monkeypatch) -> None:
+    """Seed 002's camera on the default set: a 4-star frame that ``sparse``'s fallbacks leave is
+    not searched again by ``narrow``'s (SPARSE_FRAME_ONE_MEMBER), as it was without the flag."""
+    import service.core.pipeline as pipeline
+
+    camera = PRESETS["seed002"].camera
+    four = random_points(camera, 4, rng=7)
+    solve(four, camera, default_set_db)  # (a first solve warms the set up: its own solves aside)
+    calls: list[tuple[str, tuple[str, ...]]] = []
+    identify = pipeline._identify
+
+    def spy(obs, db, methods, *args, **kw):  # type: ignore[no-untyped-def]
+        calls.append((db.path.name, tuple(methods)))
+        return identify(obs, db, methods, *args, **kw)
+
+    monkeypatch.setattr(pipeline, "_identify", spy)
+    fallbacks = lambda: {m for m, methods in calls if "quad" not in methods}  # noqa: E731
+    assert not solve(four, camera, default_set_db).solved
+    assert fallbacks() == {"sparse"}
+    calls.clear()
+    monkeypatch.setattr(pipeline, "SPARSE_FRAME_ONE_MEMBER", False)
+    assert not solve(four, camera, default_set_db).solved
+    assert fallbacks() == {"sparse", "narrow"}

@@ -105,7 +105,7 @@ def test_rig_identifies_99_percent_with_no_wrong_answer(db: NavDatabase) -> None
 
 @pytest.mark.slow
 def test_random_points_never_solve(db: NavDatabase) -> None:
-    for i in range(125):  # every split of 3-27 points a camera, five times
+    for i in range(75):  # every split of 3-27 points a camera, three times (five until session 25)
         pts = random_rig_points(RIG, [3 + i % 25, 3 + (7 * i) % 25], rng=i)
         assert not solve_rig(pts, db, method="multifov", options=OPTIONS).solved
 

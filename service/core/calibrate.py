@@ -123,7 +123,7 @@ def identify(frames: Sequence[Centroids], camera: Camera, db: Any, *, method: st
         idx = np.array([s.centroid for s in sol.stars])
         ra = np.radians([s.ra_deg for s in sol.stars])
         dec = np.radians([s.dec_deg for s in sol.stars])
-        f_px = None if sol.fov_deg is None else (camera.width / 2) / math.tan(math.radians(sol.fov_deg) / 2)
+        f_px = None if sol.fov_deg is None else Camera.from_fov(sol.fov_deg, camera.width, camera.height).f_px
         out.append(_Matched(np.asarray(cents.xy)[idx], radec_to_vector(ra, dec),
                             quat_to_matrix(np.asarray(sol.quaternion, dtype=np.float64)), f_px))
     return out

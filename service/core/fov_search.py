@@ -135,8 +135,8 @@ def focal_ladder(camera: Camera, fov_error_deg: float, radius_px: float) -> np.n
     radius at the corner of one step."""
     fov = camera.fov_deg
     lo_fov, hi_fov = max(fov - fov_error_deg, 0.01), min(fov + fov_error_deg, 169.0)
-    f_of = lambda deg: (camera.width / 2.0) / math.tan(math.radians(deg) / 2.0)  # noqa: E731
-    f_lo, f_hi = f_of(hi_fov), f_of(lo_fov)  # a wider field is a shorter focal length
+    f_lo, f_hi = (Camera.from_fov(deg, camera.width, camera.height).f_px  # a wider field: a shorter f
+                  for deg in (hi_fov, lo_fov))
     step = radius_px / (0.5 * math.hypot(camera.width, camera.height))
     n_up = int(math.floor(math.log(f_hi / camera.f_px) / math.log1p(step)))
     n_down = int(math.floor(math.log(camera.f_px / f_lo) / math.log1p(step)))

@@ -518,8 +518,8 @@ def solve_image(
     rows = np.column_stack([found.centroids.xy, found.centroids.flux]).round(3)
     object.__setattr__(sol, "detected", tuple((float(x), float(y), float(f)) for x, y, f in rows))
     if sol.solved and sol.quaternion is not None:
-        fitted = camera if sol.fov_deg is None else replace(camera, f_px=(camera.width / 2) / math.tan(
-            math.radians(sol.fov_deg) / 2))  # (the focal length a search over them fitted)
+        fitted = camera if sol.fov_deg is None else replace(  # (the focal length a search fitted)
+            camera, f_px=Camera.from_fov(sol.fov_deg, camera.width, camera.height).f_px)
         object.__setattr__(sol, "wcs", tan_wcs(quat_to_matrix(np.asarray(sol.quaternion)), fitted))
     return sol
 

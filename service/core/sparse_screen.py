@@ -1,0 +1,98 @@
+"""A 3-4-star frame that no catalogue triangle fits: given up before ``auto``'s fallbacks search it.
+
+On a frame of 3 or 4 stars the fallbacks (``maxangle``, ``pyramid``, ``triangle``) can name the
+stars in two ways only:
+
+- the verifier's proof, which pairs at least 4 stars (``Verifier.min_matches``): on a 4-star
+  frame every star, so each of its 4 triangles is a catalogue triangle of the member;
+- ``triangle``'s unique-triangle proof (:func:`~.sparse_proof.check_unique_triangle`), which needs
+  a triangle matching exactly one catalogue triple.
+
+Both start from the catalogue triples whose sides lie within the pattern tolerance of an
+observed triangle's: the triples ``pyramid`` and ``triangle`` join, read from the member's
+triangle table (:func:`~.methods._table_join.triangle_table`). One compiled call counts them for
+every triangle of the frame (:func:`triangle_match_counts`). Where no triangle of a 4-star frame
+fits a single triple, or a 3-star frame's one triangle fits none or several, no method could
+prove the frame on that member, and its fallbacks are not searched (:func:`hopeless`).
+
+Measured on seed 002's camera (4 deg, 4096 px, 7.0 Mv; the default set's ``sparse`` member;
+bench_peers' 15 points, seed 0; ``/work/s27/cand4.py``): 175 of the 249 unsolved 4-star frames and
+103 of the 114 unsolved 3-star frames have no triangle fitting any triple; every solved frame has
+one. Those frames cost 0.16-0.5 ms each in the three fallbacks (tetra3rs at 0.002: 5 us).
+``maxangle`` reads its own table with a ``theta_max`` window propagated from the same tolerance,
+which can admit a triple one side of which is a little beyond it; a proof through such a triple
+would pair a star beyond the match radius it is checked against, so none is lost (the answers of
+the benchmark's frames before and after are compared in the commit that made this module).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .methods._table_join import triangle_table
+from .methods.maxangle_index import box_cells
+from .navdb.reader import NavDatabase
+
+SCREENED_METHODS = frozenset({"maxangle", "pyramid", "triangle"})
+"""The fallbacks :func:`hopeless` stands for: their proofs start from a catalogue triple fitting an
+observed triangle."""
+
+MAX_SCREENED_STARS = 4
+"""Frames of at most this many stars are screened: the verifier's proof pairs them all."""
+
+
+@njit(cache=True, nogil=True)
+def triangle_match_counts(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab: np.ndarray,
+                          ids: np.ndarray, star_vec: np.ndarray, obs_vec: np.ndarray, tol: float, n_cells: int,
+                          b_scale: float, d_max: float, xi: float, theta_max: float) -> np.ndarray:
+    """For each triangle of the stars ``obs_vec`` ``(N, 3)`` (unit vectors, any frame; the
+    triangles ``(i, j, k)``, ``i < j < k``, in lexicographic order), the number of catalogue
+    triples with the same handedness whose three sides lie within ``tol`` (rad) of its own, read
+    from a ``cells`` triangle table (:func:`~.methods.maxangle_index.box_cells`); -1 where the
+    table may not hold them all (a side beyond its reach)."""
+    n = len(obs_vec)
+    out = np.full(n * (n - 1) * (n - 2) // 6, -1, np.int64)
+    tri = np.empty((3, 3))
+    t = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            for k in range(j + 1, n):
+                for a in range(3):
+                    tri[0, a], tri[1, a], tri[2, a] = obs_vec[i, a], obs_vec[j, a], obs_vec[k, a]
+                ok, got = box_cells(key, cell_start, b_tab, c_tab, ids, star_vec, tri, _angle(tri, 0, 1),
+                                    _angle(tri, 0, 2), _angle(tri, 1, 2), tol, n_cells, b_scale, d_max, xi,
+                                    theta_max)
+                if ok:
+                    out[t] = len(got)
+                t += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _angle(v: np.ndarray, i: int, j: int) -> float:
+    """Angle (rad) between rows ``i`` and ``j`` of ``v``, as the pair table computes it."""
+    s = 0.0
+    for a in range(3):
+        x = v[i, a] - v[j, a]
+        s += x * x
+    return 2.0 * math.asin(min(math.sqrt(s) / 2.0, 1.0))
+
+
+def hopeless(obs_vec: np.ndarray, db: NavDatabase, tol: float) -> bool:
+    """Can no fallback of :data:`SCREENED_METHODS` on member ``db`` prove this frame of 3-4 stars
+    (``obs_vec`` ``(N, 3)``, body frame) at pattern tolerance ``tol`` (rad)? True where no triangle
+    of a 4-star frame fits any catalogue triple, or a 3-star frame's one triangle fits none or
+    several (see the module's docstring); False where one might, or the member has no triangle
+    table to ask, or a triangle reaches past it."""
+    n = len(obs_vec)
+    table = triangle_table(db) if 3 <= n <= MAX_SCREENED_STARS else None
+    if table is None:
+        return False
+    counts = triangle_match_counts(*table[:6], np.ascontiguousarray(obs_vec, dtype=np.float64), float(tol),
+                                   *table[6:])
+    if n == 3:
+        return bool(counts[0] >= 0 and counts[0] != 1)
+    return bool((counts == 0).all())

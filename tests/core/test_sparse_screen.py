@@ -1,0 +1,94 @@
+"""The screen of 3-4-star frames (:mod:`service.core.sparse_screen`) on the default set's ``sparse``
+member, with seed 002's camera (4 deg, 4096 px, 7.0 Mv): it counts what the triangle table
+holds, gives up the frames nothing could prove, and changes no answer."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import service.core.pipeline as pipeline
+from service.core.camera import brightest_first
+from service.core.evaluate import score
+from service.core.geometry import pairwise_angles
+from service.core.methods._table_join import table_triples, triangle_table
+from service.core.pipeline import SolveOptions, solve
+from service.core.presets import PRESETS
+from service.core.sim import SimConfig, random_points, simulate_frames
+from service.core.sparse_screen import hopeless, triangle_match_counts
+
+CAMERA = PRESETS["seed002"].camera
+OPTIONS = SolveOptions(centroid_sigma_px=1.0)
+TOL = (3 * math.sqrt(2) * OPTIONS.centroid_sigma_px + 0.5) / CAMERA.f_px
+
+
+def _vectors(centroids) -> np.ndarray:
+    """A frame's unit vectors, brightest first, as the pipeline's observation holds them."""
+    return brightest_first(np.ascontiguousarray(centroids.xy, dtype=np.float64),
+                           np.ascontiguousarray(centroids.flux, dtype=np.float64),
+                           float(CAMERA.cx), float(CAMERA.cy), float(CAMERA.f_px))[2]
+
+
+@pytest.fixture(scope="module")
+def sparse_member(default_set_db):
+    return default_set_db.members["sparse"]
+
+
+@pytest.fixture(scope="module")
+def small_frames():
+    """Frames of 3-4 centroids at 1 px with 2 false stars, and without false stars."""
+    frames = []
+    for false_stars, seed in ((2, 271), (0, 272)):
+        config = SimConfig(mag_limit=7.0, centroid_noise_px=1.0, false_stars=false_stars)
+        frames += [f for f in simulate_frames(CAMERA, 700, config, rng=seed) if 3 <= len(f.centroids) <= 4]
+    return frames
+
+
+def test_counts_are_the_triples_the_table_holds(sparse_member, small_frames) -> None:
+    table = triangle_table(sparse_member)
+    assert table is not None
+    checked = 0
+    for f in small_frames[:40]:
+        v = _vectors(f.centroids)
+        counts = triangle_match_counts(*table[:6], v, TOL, *table[6:])
+        assert len(counts) == math.comb(len(v), 3)
+        triangles = [(i, j, k) for i in range(len(v)) for j in range(i + 1, len(v)) for k in range(j + 1, len(v))]
+        for (i, j, k), count in zip(triangles, counts, strict=True):
+            d = pairwise_angles(v[[i, j, k]])
+            got = table_triples(table, v[[i, j, k]], d[0, 1], d[0, 2], d[1, 2], TOL)
+            assert count == (-1 if got is None else len(got))
+            checked += count >= 0
+    assert checked > 50
+
+
+def test_a_true_triangle_is_counted_and_random_points_are_hopeless(sparse_member, small_frames) -> None:
+    clean = [f for f in small_frames if not (f.hip < 0).any() and len(f.centroids) == 4]
+    assert clean
+    for f in clean:
+        assert not hopeless(_vectors(f.centroids), sparse_member, TOL)
+    rng = np.random.default_rng(5)
+    given_up = sum(hopeless(_vectors(random_points(CAMERA, 4, rng=rng)), sparse_member, TOL) for _ in range(200))
+    assert given_up >= 100  # measured 133 of 200 (the rest: a triangle fits, or reaches past the table)
+
+
+def test_the_screen_changes_no_answer(default_set_db, small_frames, monkeypatch) -> None:
+    """Every 3-4-star frame gets the same answer with the screen and without it, and the screen
+    gives up some of them."""
+    solve(small_frames[0].centroids, CAMERA, default_set_db, options=OPTIONS)  # (warm-up)
+    member = default_set_db.members["sparse"]
+    answers = {}
+    for flag in (True, False):
+        monkeypatch.setattr(pipeline, "SPARSE_SCREEN", flag)
+        answers[flag] = [solve(f.centroids, CAMERA, default_set_db, options=OPTIONS) for f in small_frames]
+    solved = 0
+    for f, on, off in zip(small_frames, answers[True], answers[False], strict=True):
+        assert on.solved == off.solved
+        assert [s.hip for s in on.stars] == [s.hip for s in off.stars]
+        if on.solved:
+            solved += 1
+            assert on.quaternion == off.quaternion
+            assert score(on, f.quaternion, f.hip.tolist(), blends=f.blends).correct
+    screened = sum(hopeless(_vectors(f.centroids), member, TOL) for f in small_frames)
+    assert solved >= 20 and screened >= 20

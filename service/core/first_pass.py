@@ -159,6 +159,22 @@ def frame_first_pass_kernel(xy_in, flux_in, cx, cy, f_px, mounts, cams, dist, ro
     return first_pass_kernel(vec, xy, flux, True, mounts, cams, dist, rows, row_off, order, probes, *static)
 
 
+def kernel_entry() -> Any:
+    """:func:`frame_first_pass_kernel`'s compiled entry point, called with the static arguments
+    as one tuple (``entry(xy, flux, cx, cy, f_px, mounts, cams, dist, rows, row_off, probes,
+    static)``), or None unless the kernel holds exactly one compiled signature.
+
+    Asked after a call through the dispatcher: that call's argument types are then the one
+    signature's, and the same set-up's later frames (the same static arguments, the centroids as
+    C-contiguous float64 arrays of 2 and 1 dimensions) have them too. The entry skips the
+    dispatcher's typing of the ~70 arguments (numba unboxes them, checking each array's dtype but
+    not its dimensions: the caller checks those), 2-9 us a frame (``/work/s27/dispatch.py``)."""
+    overloads = frame_first_pass_kernel.overloads
+    if len(overloads) != 1:
+        return None
+    return next(iter(overloads.values())).entry_point
+
+
 def _solved(ints: np.ndarray, floats: np.ndarray, db: NavDatabase) -> FirstPass:
     """A solved :class:`FirstPass` from the arrays :func:`settle_kernel` packs (rows of ``db``)."""
     trials, n = ints[:2].tolist()

@@ -29,6 +29,7 @@ from .first_pass import (
     _static_args,
     first_pass,
     frame_first_pass_kernel,
+    kernel_entry,
     settle,
     solved_solution,
     unsolved,
@@ -271,10 +272,18 @@ def solve_rig(
             # the first pass from the centroids as given: a frame it proves needs no Observation
             # (its vectors are made inside the call: ``vectors`` is 0 and ``identify`` holds them)
             cents, cam = frames[0][0], frames[0][1]
-            solved, _, ints, floats = frame_first_pass_kernel(
-                np.ascontiguousarray(cents.xy, dtype=np.float64), np.ascontiguousarray(cents.flux, dtype=np.float64),
-                float(cam.cx), float(cam.cy), float(cam.f_px), arrays.mounts, arrays.cams, arrays.dist, arrays.rows,
-                arrays.row_off, setup.probes, *setup.static)
+            xy = np.ascontiguousarray(cents.xy, dtype=np.float64)
+            flux = np.ascontiguousarray(cents.flux, dtype=np.float64)
+            entry = setup.entry[0]
+            if entry is not None and xy.ndim == 2 and flux.ndim == 1:  # (first_pass.kernel_entry)
+                solved, _, ints, floats = entry(xy, flux, float(cam.cx), float(cam.cy), float(cam.f_px), arrays.mounts,
+                                                arrays.cams, arrays.dist, arrays.rows, arrays.row_off, setup.probes,
+                                                setup.static)
+            else:
+                solved, _, ints, floats = frame_first_pass_kernel(
+                    xy, flux, float(cam.cx), float(cam.cy), float(cam.f_px), arrays.mounts, arrays.cams, arrays.dist,
+                    arrays.rows, arrays.row_off, setup.probes, *setup.static)
+                setup.entry[0] = kernel_entry()
             t2 = time.perf_counter()
             if solved:
                 timings["vectors"], timings["identify"] = 0.0, (t2 - t0) * 1e3

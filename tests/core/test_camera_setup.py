@@ -35,6 +35,7 @@ def test_frames_solved_with_the_kept_setup_answer_as_without(default_set_db, pre
     assert setup is not None and setup.camera is p.camera and setup.options is options
     kept = [solve(c, p.camera, default_set_db, options=options) for c in frames]
     assert kept_setup(default_set_db, p.camera, "auto", options) is setup  # used, not remade
+    assert setup.entry[0] is not None  # the later frames called the kernel's entry (first_pass.kernel_entry)
     # the general path, which keeps no set-up: the same answers
     monkeypatch.setattr(pipeline, "COMPILED_FIRST_PASS", False)
     fresh = []

@@ -208,7 +208,8 @@ class Verifier:
         """Test every candidate triple ``cands`` ``(K, 3)`` for one observed triangle
         ``obs_idx`` (see :meth:`screen_and_check_many`)."""
         cands = np.asarray(cands, dtype=np.int64).reshape(-1, 3)
-        tris = np.broadcast_to(np.asarray(obs_idx, dtype=np.int64), cands.shape)
+        tris = np.empty(cands.shape, np.int64)  # (a writable array: a read-only broadcast view of one
+        tris[:] = np.asarray(obs_idx, dtype=np.int64)  # candidate was a second compiled signature of the screen)
         return self.screen_and_check_many(tris, cands, n_patterns=1)
 
     def screen_and_check_many(self, obs_tris: IntArray, cands: IntArray, *, n_patterns: int) -> Verified | None:

@@ -38,6 +38,11 @@ def test_after_warm_up_auto_compiles_nothing_more(default_set_db) -> None:
                                                                               false_stars=2), rng=2)]
         frames += [Centroids(f.xy[:n], f.flux[:n]) for f in frames[:1] for n in (3, 4, 6)]
         frames += [random_points(p.camera, n, rng) for n in (5, 12, 30)]
+        if key == "seed002":  # a 4-star frame (bench_wrong's, 0.25 px) that pyramid proves from a
+            # triangle of one candidate: the read-only view of that candidate was a second compiled
+            # signature of the screen, 1-2 s inside a request on a fresh install (session 26)
+            frames.append(Centroids(np.array([[2800.29, 281.83], [628.6, 3971.0], [3220.25, 1874.79], [38.34, 89.75]]),
+                                    np.array([1871.0, 1308.7, 472.8, 422.6])))
         for centroids in frames:
             solve(centroids, p.camera, default_set_db, options=SolveOptions(centroid_sigma_px=1.0))
     after = _compiled_signatures()

@@ -43,7 +43,7 @@ from .navdb.reader import NavDatabase, NavDatabaseSet
 from .plan import fallback_next, search_plan
 from .refusal import SPARSE_ADVICE_STARS, no_solution, refusal, sparse_advice
 from .solution import solution_of
-from .sparse_screen import MAX_SCREENED_STARS, SCREENED_METHODS, hopeless
+from .sparse_screen import HOPELESS, MAX_SCREENED_STARS, SCREENED_METHODS, SEARCH, SPARSE_ONLY, screen
 from .types import Centroids, Solution
 from .verify import Observation, Verified, Verifier, camera_probes
 from .wcs import tan_wcs
@@ -168,9 +168,14 @@ do not use that bound)."""
 SPARSE_SCREEN = True
 """Before ``maxangle``, ``pyramid`` or ``triangle`` search a one-camera frame of 3-4 stars on a
 member, one compiled call counts the catalogue triples fitting each of its triangles; where none
-could lead to a proof, they are not searched (:mod:`service.core.sparse_screen`; seed 002's
+could lead to a proof, they are not searched, and where only ``triangle``'s unique-triangle proof
+could, ``maxangle`` and ``pyramid`` are not (:mod:`service.core.sparse_screen`; seed 002's
 unsolved 4-star frames: 0.16-0.5 ms each before). False searches them as before (the tests
 compare the two)."""
+
+VERIFIER_ONLY = frozenset({"maxangle", "pyramid"})
+"""Screened fallbacks whose only proof is the verifier's (at least 4 stars paired): not run on a
+frame the screen leaves to ``triangle``'s unique-triangle proof (``sparse_screen.SPARSE_ONLY``)."""
 
 COMPILED_FIRST_PASS = True
 """Run ``auto``'s first pass as one compiled call (:mod:`service.core.first_pass`); False takes
@@ -416,10 +421,10 @@ def _identify(
     verifier = Verifier(db, obs, match_radius_px=radius, max_false_prob=options.max_false_prob, trials=trials,
                         deadline=deadline, trial_limit=trial_limit)
     used = methods[-1]
-    # a 3-4-star frame no catalogue triangle of this member fits: its screened fallbacks are
-    # looked up in one compiled call and not searched (SPARSE_SCREEN)
-    screened = (SPARSE_SCREEN and len(obs) <= MAX_SCREENED_STARS and len(obs.cameras) == 1
-                and not SCREENED_METHODS.isdisjoint(methods) and hopeless(obs.vec, db, tol))
+    # a 3-4-star frame too few of whose triangles fit a catalogue triple of this member: what
+    # cannot prove it is not searched (SPARSE_SCREEN: one compiled call)
+    verdict = (screen(obs.vec, db, tol) if SPARSE_SCREEN and len(obs) <= MAX_SCREENED_STARS
+               and len(obs.cameras) == 1 and not SCREENED_METHODS.isdisjoint(methods) else SEARCH)
     for name in methods:
         if name in TRIANGLE_PROOF_METHODS and not verifier.could_prove(3):
             if unprovable is not None:
@@ -429,9 +434,9 @@ def _identify(
             if tried and (time.perf_counter() > deadline or verifier.over_limit()):
                 break
             tried.append(name)
-        if screened and name in SCREENED_METHODS:
+        if verdict == HOPELESS and name in SCREENED_METHODS or verdict == SPARSE_ONLY and name in VERIFIER_ONLY:
             continue
-        ctx = SolveContext(obs, verifier, tol, deadline, options.max_stars)
+        ctx = SolveContext(obs, verifier, tol, deadline, options.max_stars, sparse_only=verdict == SPARSE_ONLY)
         found = get_matcher(db, name).identify(ctx) or verifier.best_marginal()
         if name == "quad" and misses is not None:
             misses.append(found is None and verifier.exhausted)

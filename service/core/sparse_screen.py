@@ -18,7 +18,9 @@ prove the frame on that member, and its fallbacks are not searched (:func:`hopel
 Measured on seed 002's camera (4 deg, 4096 px, 7.0 Mv; the default set's ``sparse`` member;
 bench_peers' 15 points, seed 0; ``/work/s27/cand4.py``): 175 of the 249 unsolved 4-star frames and
 103 of the 114 unsolved 3-star frames have no triangle fitting any triple; every solved frame has
-one. Those frames cost 0.16-0.5 ms each in the three fallbacks (tetra3rs at 0.002: 5 us).
+one. Those frames cost 0.16-0.5 ms each in the three fallbacks (tetra3rs at 0.002: 5 us). Of the
+rest, a 4-star frame whose triangles but one fit nothing (6 of 15 unsolved 4-star frames at 1 px
+and 2 false stars) is left to ``triangle``'s unique-triangle proof alone (:data:`SPARSE_ONLY`).
 ``maxangle`` reads its own table with a ``theta_max`` window propagated from the same tolerance,
 which can admit a triple one side of which is a little beyond it; a proof through such a triple
 would pair a star beyond the match radius it is checked against, so none is lost (the answers of
@@ -81,18 +83,45 @@ def _angle(v: np.ndarray, i: int, j: int) -> float:
     return 2.0 * math.asin(min(math.sqrt(s) / 2.0, 1.0))
 
 
-def hopeless(obs_vec: np.ndarray, db: NavDatabase, tol: float) -> bool:
-    """Can no fallback of :data:`SCREENED_METHODS` on member ``db`` prove this frame of 3-4 stars
-    (``obs_vec`` ``(N, 3)``, body frame) at pattern tolerance ``tol`` (rad)? True where no triangle
-    of a 4-star frame fits any catalogue triple, or a 3-star frame's one triangle fits none or
-    several (see the module's docstring); False where one might, or the member has no triangle
-    table to ask, or a triangle reaches past it."""
+SEARCH, SPARSE_ONLY, HOPELESS = 0, 1, 2
+""":func:`screen`'s verdicts: search the frame as before; only ``triangle``'s unique-triangle
+proof could name it; nothing could."""
+
+
+def screen(obs_vec: np.ndarray, db: NavDatabase, tol: float) -> int:
+    """What could prove this frame of 3-4 stars (``obs_vec`` ``(N, 3)``, body frame) on member
+    ``db`` at pattern tolerance ``tol`` (rad), from the catalogue triples fitting each of its
+    triangles (:func:`triangle_match_counts`):
+
+    - ``HOPELESS``: no triangle of a 4-star frame fits any triple, or only one does and it fits
+      several, or a 3-star frame's one triangle fits none or several;
+    - ``SPARSE_ONLY``: three triangles of a 4-star frame fit none, the fourth exactly one. The
+      three share the star outside the fourth: a verifier's proof would pair it within the match
+      radius (3 sigma) while every side it makes misses by more than the tolerance
+      (``3 sqrt(2) sigma + 0.5 px``) in all three. ``pyramid`` gives up after two such
+      triangles already (``EMPTY_TRIANGLES_TO_REFUSE``); the unique triangle may still be its
+      own proof;
+    - ``SEARCH`` otherwise, or where the member has no triangle table or a triangle reaches
+      past it."""
     n = len(obs_vec)
     table = triangle_table(db) if 3 <= n <= MAX_SCREENED_STARS else None
     if table is None:
-        return False
+        return SEARCH
     counts = triangle_match_counts(*table[:6], np.ascontiguousarray(obs_vec, dtype=np.float64), float(tol),
                                    *table[6:])
+    if (counts < 0).any():
+        return SEARCH
     if n == 3:
-        return bool(counts[0] >= 0 and counts[0] != 1)
-    return bool((counts == 0).all())
+        return SEARCH if counts[0] == 1 else HOPELESS
+    fitting = counts[counts > 0]
+    if len(fitting) == 0:
+        return HOPELESS
+    if len(fitting) == 1:
+        return SPARSE_ONLY if fitting[0] == 1 else HOPELESS
+    return SEARCH
+
+
+def hopeless(obs_vec: np.ndarray, db: NavDatabase, tol: float) -> bool:
+    """Can no fallback of :data:`SCREENED_METHODS` on member ``db`` prove this frame of 3-4 stars?
+    (:func:`screen`'s ``HOPELESS``.)"""
+    return screen(obs_vec, db, tol) == HOPELESS

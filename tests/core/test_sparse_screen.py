@@ -17,7 +17,7 @@ from service.core.methods._table_join import table_triples, triangle_table
 from service.core.pipeline import SolveOptions, solve
 from service.core.presets import PRESETS
 from service.core.sim import SimConfig, random_points, simulate_frames
-from service.core.sparse_screen import hopeless, triangle_match_counts
+from service.core.sparse_screen import HOPELESS, SEARCH, SPARSE_ONLY, hopeless, screen, triangle_match_counts
 
 CAMERA = PRESETS["seed002"].camera
 OPTIONS = SolveOptions(centroid_sigma_px=1.0)
@@ -75,7 +75,7 @@ def test_a_true_triangle_is_counted_and_random_points_are_hopeless(sparse_member
 
 def test_the_screen_changes_no_answer(default_set_db, small_frames, monkeypatch) -> None:
     """Every 3-4-star frame gets the same answer with the screen and without it, and the screen
-    gives up some of them."""
+    gives up some of them and leaves some to the unique-triangle proof alone."""
     solve(small_frames[0].centroids, CAMERA, default_set_db, options=OPTIONS)  # (warm-up)
     member = default_set_db.members["sparse"]
     answers = {}
@@ -90,5 +90,23 @@ def test_the_screen_changes_no_answer(default_set_db, small_frames, monkeypatch)
             solved += 1
             assert on.quaternion == off.quaternion
             assert score(on, f.quaternion, f.hip.tolist(), blends=f.blends).correct
-    screened = sum(hopeless(_vectors(f.centroids), member, TOL) for f in small_frames)
-    assert solved >= 20 and screened >= 20
+    verdicts = [screen(_vectors(f.centroids), member, TOL) for f in small_frames]
+    assert solved >= 20 and verdicts.count(HOPELESS) >= 20 and verdicts.count(SPARSE_ONLY) >= 3
+
+
+def test_the_verdicts_follow_the_counts(sparse_member, small_frames) -> None:
+    """Nothing fits: hopeless; a 4-star frame with one fitting triangle: that triangle's unique
+    proof alone, if it fits exactly one triple; a 3-star frame: searched only when unique."""
+    table = triangle_table(sparse_member)
+    for f in small_frames:
+        v = _vectors(f.centroids)
+        counts = triangle_match_counts(*table[:6], v, TOL, *table[6:])
+        verdict = screen(v, sparse_member, TOL)
+        if (counts < 0).any():
+            assert verdict == SEARCH
+        elif len(v) == 3:
+            assert verdict == (SEARCH if counts[0] == 1 else HOPELESS)
+        elif (counts > 0).sum() == 1:
+            assert verdict == (SPARSE_ONLY if counts.max() == 1 else HOPELESS)
+        else:
+            assert verdict == (HOPELESS if (counts == 0).all() else SEARCH)

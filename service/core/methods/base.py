@@ -33,6 +33,10 @@ class SolveContext:
         ``time.perf_counter()`` value after which the matcher gives up.
     max_stars : int
         How many of the brightest stars a matcher may combine into patterns.
+    sparse_only : bool
+        Only a proof naming fewer stars than the verifier pairs (``triangle``'s unique-triangle
+        proof) could name this frame: the pipeline's screen of a 3-4-star frame found too few
+        of its triangles fitting a catalogue triple for the verifier's (:mod:`~..sparse_screen`).
     """
 
     obs: Observation
@@ -40,6 +44,7 @@ class SolveContext:
     tol_rad: float
     deadline: float
     max_stars: int = 12
+    sparse_only: bool = False
 
     def expired(self) -> bool:
         """Out of time or of hypotheses (the verifier's ``trial_limit``), or a marginal answer

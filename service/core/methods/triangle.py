@@ -237,9 +237,11 @@ class TriangleMatcher:
                 unique.append((idx, cand[0]))
             if len(cand) == 0 or len(cand) > MAX_CANDIDATES:
                 continue
-            if not ctx.verifier.could_prove(3):
+            if ctx.sparse_only or not ctx.verifier.could_prove(3):
                 # no check of a triangle could pass the bound any more (a 3-4 star frame past a
-                # trial or two): counted as tried, as the screen would count them, and not checked
+                # trial or two), or the frame's other triangles fit no catalogue triple (the
+                # pipeline's sparse screen): counted as tried, as the screen would count them,
+                # and not checked
                 ctx.verifier.count_unchecked(len(cand))
                 continue
             found = ctx.verifier.screen_and_check(idx, cand)

@@ -168,11 +168,17 @@ def kernel_entry() -> Any:
     signature's, and the same set-up's later frames (the same static arguments, the centroids as
     C-contiguous float64 arrays of 2 and 1 dimensions) have them too. The entry skips the
     dispatcher's typing of the ~70 arguments (numba unboxes them, checking each array's dtype but
-    not its dimensions: the caller checks those), 2-9 us a frame (``/work/s27/dispatch.py``)."""
-    overloads = frame_first_pass_kernel.overloads
-    if len(overloads) != 1:
+    not its dimensions: the caller checks those), 2-9 us a frame (``/work/s27/dispatch.py``).
+    Kept once taken: iterating the dispatcher's dict of overloads costs ~40 us, a camera's first
+    sight's whole Python budget again (each real image is one)."""
+    if len(frame_first_pass_kernel.overloads) != 1:
         return None
-    return next(iter(overloads.values())).entry_point
+    if _ENTRY[0] is None:  # (the one signature compiled or loaded is the first: overloads only grow)
+        _ENTRY[0] = next(iter(frame_first_pass_kernel.overloads.values())).entry_point
+    return _ENTRY[0]
+
+
+_ENTRY: list[Any] = [None]
 
 
 def _solved(ints: np.ndarray, floats: np.ndarray, db: NavDatabase) -> FirstPass:

@@ -12,8 +12,8 @@ three ways and reports the median and mean us a frame:
 - **evicted**: each frame after ``--evict-mb`` MB of other writes (code and data cold).
 
 Each is split into the compiled first pass (the call made from the centroids as given,
-``first_pass.frame_first_pass_kernel``, or ``first_pass_kernel`` on the general path; its
-argument dispatch included) and the rest (Python around it, and any later passes). A last row
+``first_pass.frame_first_pass_kernel``, its entry point once the camera's set-up has one, or
+``first_pass_kernel`` on the general path; its argument dispatch included) and the rest (Python around it, and any later passes). A last row
 times the first pass evicted but with its code warmed by another frame just before: what the
 frame's own data costs (docs/performance.md, session 20).
 """
@@ -31,6 +31,7 @@ import numpy as np  # noqa: E402
 
 from service.core import first_pass as first_pass_mod  # noqa: E402
 from service.core import pipeline  # noqa: E402
+from service.core.camera_setup import kept_setup  # noqa: E402
 from service.core.navdb import ensure_default_database, open_database  # noqa: E402
 from service.core.pipeline import SolveOptions, solve  # noqa: E402
 from service.core.presets import PRESETS  # noqa: E402
@@ -41,23 +42,39 @@ KERNELS = ((pipeline, "frame_first_pass_kernel"), (first_pass_mod, "first_pass_k
 
 
 class _Timed:
-    """Wraps the first pass's compiled calls, summing their wall time (s) since ``reset``."""
+    """Wraps the first pass's compiled calls, summing their wall time (s) since ``reset``: the
+    kernels, and the entry point a camera's set-up calls once it has one
+    (``first_pass.kernel_entry``; ``setups`` kept before, and any made inside the block)."""
 
-    def __init__(self) -> None:
+    def __init__(self, setups: Sequence[Any] = ()) -> None:
         self.total = 0.0
         self.calls: list[tuple[Callable[..., Any], tuple[Any, ...]]] = []
         self._saved: list[tuple[Any, str, Callable[..., Any]]] = []
+        self._setups = [s for s in setups if s is not None]
+        self._entries: list[tuple[Any, Any]] = []
 
     def __enter__(self) -> _Timed:
-        for mod, name in KERNELS:
+        for mod, name in (*KERNELS, (pipeline, "kernel_entry")):
             fn = getattr(mod, name)
             self._saved.append((mod, name, fn))
-            setattr(mod, name, self._wrap(fn))
+            setattr(mod, name, self._wrap_entry(fn) if name == "kernel_entry" else self._wrap(fn))
+        for setup in self._setups:
+            self._entries.append((setup, setup.entry[0]))
+            if setup.entry[0] is not None:
+                setup.entry[0] = self._wrap(setup.entry[0])
         return self
 
     def __exit__(self, *exc: object) -> None:
         for mod, name, fn in self._saved:
             setattr(mod, name, fn)
+        for setup, entry in self._entries:
+            setup.entry[0] = entry
+
+    def _wrap_entry(self, kernel_entry: Callable[[], Any]) -> Callable[[], Any]:
+        def timed_entry() -> Any:
+            entry = kernel_entry()
+            return None if entry is None else self._wrap(entry)
+        return timed_entry
 
     def _wrap(self, fn: Callable[..., Any]) -> Callable[..., Any]:
         def timed(*args: Any) -> Any:
@@ -100,7 +117,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         solve(c, p.camera, db, options=options)
     rows = {"warm": ([], []), "in turn": ([], []), "evicted": ([], [])}
     first_calls: list[tuple[Callable[..., Any], tuple[Any, ...]]] = []
-    with _Timed() as timed:
+    with _Timed([kept_setup(db, p.camera, "auto", options)]) as timed:
         for c in frames:
             solve(c, p.camera, db, options=options)
             timed.reset()

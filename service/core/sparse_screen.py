@@ -13,7 +13,8 @@ observed triangle's: the triples ``pyramid`` and ``triangle`` join, read from th
 triangle table (:func:`~.methods._table_join.triangle_table`). One compiled call counts them for
 every triangle of the frame (:func:`triangle_match_counts`). Where no triangle of a 4-star frame
 fits a single triple, or a 3-star frame's one triangle fits none or several, no method could
-prove the frame on that member, and its fallbacks are not searched (:func:`hopeless`).
+prove the frame on that member, and its fallbacks are not searched (:func:`screen`'s
+``HOPELESS``).
 
 Measured on seed 002's camera (4 deg, 4096 px, 7.0 Mv; the default set's ``sparse`` member;
 bench_peers' 15 points, seed 0; ``/work/s27/cand4.py``): 175 of the 249 unsolved 4-star frames and
@@ -29,17 +30,16 @@ the benchmark's frames before and after are compared in the commit that made thi
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
 from .methods._table_join import triangle_table
 from .methods.maxangle_index import box_cells
+from .methods.quad_build import row_angle
 from .navdb.reader import NavDatabase
 
 SCREENED_METHODS = frozenset({"maxangle", "pyramid", "triangle"})
-"""The fallbacks :func:`hopeless` stands for: their proofs start from a catalogue triple fitting an
+"""The fallbacks :func:`screen` stands for: their proofs start from a catalogue triple fitting an
 observed triangle."""
 
 MAX_SCREENED_STARS = 4
@@ -48,8 +48,9 @@ MAX_SCREENED_STARS = 4
 
 @njit(cache=True, nogil=True)
 def triangle_match_counts(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab: np.ndarray,
-                          ids: np.ndarray, star_vec: np.ndarray, obs_vec: np.ndarray, tol: float, n_cells: int,
-                          b_scale: float, d_max: float, xi: float, theta_max: float) -> np.ndarray:
+                          ids: np.ndarray, star_vec: np.ndarray, obs_vec: np.ndarray, tol: float,
+                          n_cells: int, b_scale: float, d_max: float, xi: float,
+                          theta_max: float) -> np.ndarray:
     """For each triangle of the stars ``obs_vec`` ``(N, 3)`` (unit vectors, any frame; the
     triangles ``(i, j, k)``, ``i < j < k``, in lexicographic order), the number of catalogue
     triples with the same handedness whose three sides lie within ``tol`` (rad) of its own, read
@@ -64,23 +65,13 @@ def triangle_match_counts(key: np.ndarray, cell_start: np.ndarray, b_tab: np.nda
             for k in range(j + 1, n):
                 for a in range(3):
                     tri[0, a], tri[1, a], tri[2, a] = obs_vec[i, a], obs_vec[j, a], obs_vec[k, a]
-                ok, got = box_cells(key, cell_start, b_tab, c_tab, ids, star_vec, tri, _angle(tri, 0, 1),
-                                    _angle(tri, 0, 2), _angle(tri, 1, 2), tol, n_cells, b_scale, d_max, xi,
-                                    theta_max)
+                ok, got = box_cells(key, cell_start, b_tab, c_tab, ids, star_vec, tri, row_angle(tri, 0, 1),
+                                    row_angle(tri, 0, 2), row_angle(tri, 1, 2), tol, n_cells, b_scale, d_max,
+                                    xi, theta_max)
                 if ok:
                     out[t] = len(got)
                 t += 1
     return out
-
-
-@njit(cache=True, nogil=True)
-def _angle(v: np.ndarray, i: int, j: int) -> float:
-    """Angle (rad) between rows ``i`` and ``j`` of ``v``, as the pair table computes it."""
-    s = 0.0
-    for a in range(3):
-        x = v[i, a] - v[j, a]
-        s += x * x
-    return 2.0 * math.asin(min(math.sqrt(s) / 2.0, 1.0))
 
 
 SEARCH, SPARSE_ONLY, HOPELESS = 0, 1, 2
@@ -120,8 +111,3 @@ def screen(obs_vec: np.ndarray, db: NavDatabase, tol: float) -> int:
         return SPARSE_ONLY if fitting[0] == 1 else HOPELESS
     return SEARCH
 
-
-def hopeless(obs_vec: np.ndarray, db: NavDatabase, tol: float) -> bool:
-    """Can no fallback of :data:`SCREENED_METHODS` on member ``db`` prove this frame of 3-4 stars?
-    (:func:`screen`'s ``HOPELESS``.)"""
-    return screen(obs_vec, db, tol) == HOPELESS

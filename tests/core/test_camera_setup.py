@@ -53,9 +53,13 @@ def test_frames_solved_with_the_kept_setup_answer_as_without(default_set_db, pre
     fused = [s for s in kept if s.solved and s.timings_ms["vectors"] == 0.0]
     assert len(fused) >= 10 and all(s.methods_tried == ("quad",) for s in fused)
     assert all(s.timings_ms["vectors"] > 0.0 for s in fresh if s.solved)
-    # a frame the pass did not prove: its first pass is counted in identify, not in vectors
-    refused = kept[-1]  # the random points
-    assert not refused.solved and 0.0 < refused.timings_ms["vectors"] < refused.timings_ms["identify"] / 5
+    # a frame the pass did not prove: its first pass is counted in identify, not in vectors. A
+    # bookkeeping check, not a speed claim: the least of five solves, so that one pause of a loaded
+    # machine inside ``vectors`` (1.9 ms once, against ~0.05) does not decide it
+    refused = [solve(frames[-1], p.camera, default_set_db, options=options) for _ in range(5)]  # the points
+    assert not any(s.solved for s in refused)
+    vectors = min(s.timings_ms["vectors"] for s in refused)
+    assert 0.0 < vectors < min(s.timings_ms["identify"] for s in refused) / 5
 
 
 def test_the_setup_is_per_method_and_options_and_still_refuses_too_few_stars(default_set_db) -> None:

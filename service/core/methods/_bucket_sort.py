@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _destinations(key: np.ndarray, n_buckets: int, dest: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     """Fill ``dest[i]``, row ``i``'s place in the stable order by bucket; return the buckets' starts."""
     n = key.shape[0]
@@ -32,7 +32,7 @@ def _destinations(key: np.ndarray, n_buckets: int, dest: np.ndarray) -> np.ndarr
     return starts
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _scatter(a: np.ndarray, dest: np.ndarray, done: np.ndarray) -> None:  # pragma: no cover - numba
     """Move ``a[i]`` to ``a[dest[i]]`` for every ``i``, in place (``dest`` a permutation)."""
     n = a.shape[0]
@@ -54,7 +54,7 @@ def _scatter(a: np.ndarray, dest: np.ndarray, done: np.ndarray) -> None:  # prag
             cur = nxt
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _scatter_through(a: np.ndarray, dest: np.ndarray, tmp: np.ndarray) -> None:  # pragma: no cover - numba
     """Move ``a[i]`` to ``a[dest[i]]`` through ``tmp`` (same length and dtype): independent
     writes, which the memory system overlaps, where following the permutation's cycles waits on

@@ -110,7 +110,7 @@ def build_quad_table(vec: np.ndarray, rank: np.ndarray, fov_min_deg: float, fov_
     return {"patterns": store, "table": table, "spill": spill}, used
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _field_patterns(centres: np.ndarray, chord: float, per_field: int, rank: np.ndarray, cell: float,
                     n_side: int, keys: np.ndarray, starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
                     columns: np.ndarray) -> np.ndarray:
@@ -241,7 +241,7 @@ def slot_word(pattern: int, h: np.uint64, fine: np.ndarray) -> np.int64:
     return (np.int64(pattern + 1) << 32) | sig
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pattern_words(vec: np.ndarray, patterns: np.ndarray, ratio_bin: float, edge_bin: float
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Each pattern's key hash and its entry word (:func:`slot_word`)."""
@@ -274,7 +274,7 @@ def spill_words(offsets: np.ndarray, counts: np.ndarray, hashes: np.ndarray) -> 
     return SPILL_SIGN | (offsets.astype(np.int64) << 32) | (finger << (6 * FINE_BITS)) | counts.astype(np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _place(hashes: np.ndarray, words: np.ndarray, cap: int) -> np.ndarray:
     """Open addressing (linear probing) of ``words`` at their hashes' low bits."""
     table = np.zeros(cap, np.int64)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service.core.errors import DatabaseCorruptError, DatabaseMissingError
+from service.core.errors import DatabaseCorruptError, DatabaseMissingError, InvalidInputError
 from service.core.navdb import BuildConfig, build_database, open_database
 
 SMALL = BuildConfig(fov_max_deg=10.0, fov_min_deg=8.0, mag_limit=5.0, epoch=2026.0, methods=("pyramid",))
@@ -127,3 +127,29 @@ def test_database_set_picks_a_member_per_camera(tmp_path: Path) -> None:
     (path.resolve() / "wide" / "stars__mag.npy").write_bytes(b"\x93NUMPY")
     with pytest.raises(DatabaseCorruptError, match="stars__mag.npy"):
         open_database(path)
+
+
+def test_a_set_built_on_threads_equals_its_members_built_one_by_one(tmp_path: Path, monkeypatch) -> None:
+    """build_database_set builds its members on a thread each (at most a core each): the same
+    arrays as ``build_database`` of each member alone, a progress that only rises, and a member
+    that fails fails the set with nothing published."""
+    from service.core.navdb import build_database_set, builder
+
+    members = {"narrow": BuildConfig(fov_max_deg=6.0, fov_min_deg=3.0, mag_limit=5.5, epoch=2026.0,
+                                     methods=("quad", "maxangle")),
+               "wide": BuildConfig(fov_max_deg=30.0, fov_min_deg=6.0, mag_limit=4.5, epoch=2026.0,
+                                   methods=("quad", "pyramid"))}
+    monkeypatch.setattr(builder, "build_threads", lambda: 2)  # threads even on a 1-core runner
+    seen: list[float] = []
+    path = build_database_set(tmp_path / "set", members, progress=lambda stage, frac: seen.append(frac))
+    assert seen == sorted(seen) and seen[-1] == 1.0 and len(seen) > 4
+    for name, config in members.items():
+        alone = build_database(tmp_path / name, config)
+        a = json.loads((path / name / "manifest.json").read_text())["arrays"]
+        b = json.loads((alone / "manifest.json").read_text())["arrays"]
+        assert {k: v["sha256"] for k, v in a.items()} == {k: v["sha256"] for k, v in b.items()}
+    broken = BuildConfig(fov_max_deg=30.0, fov_min_deg=6.0, mag_limit=-3.0, methods=("quad",))  # no stars
+    bad = {**members, "broken": broken}
+    with pytest.raises(InvalidInputError, match="mag_limit"):
+        build_database_set(tmp_path / "bad", bad)
+    assert not (tmp_path / "bad").exists() and not list(tmp_path.glob(".bad.*"))

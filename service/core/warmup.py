@@ -14,16 +14,18 @@ import numpy as np
 from .attitude import matrix_from_radec_roll
 from .camera import Camera
 from .deeper import could_pair_more_deeper
-from .first_pass import deeper_arrays
+from .fallback_pass import fallbacks
+from .first_pass import deeper_arrays, settle
 from .hidden import hidden_neighbours
 from .methods import get_matcher
+from .methods.quad import QUERY_STARS
 from .navdb.reader import NavDatabase, NavDatabaseSet
-from .pipeline import _ONE_CAMERA, _observation, solve, solve_rig
-from .plan import RIG_METHOD
+from .pipeline import _ONE_CAMERA, FEW_STARS_MAX_TRIALS, SolveOptions, _observation, solve, solve_rig
+from .plan import RIG_METHOD, search_plan
 from .sparse_proof import warm_up_screens
 from .star_index import FIELD_CELL_DEG, field_grid, sky_grid, star_tree
 from .types import Centroids, SolveStatus
-from .verify import Verified
+from .verify import Verified, Verifier
 
 MADV_POPULATE_READ = 22
 """Linux (5.14 and later): fault a mapping's pages in, as reads (Python names it from 3.12)."""
@@ -83,18 +85,55 @@ def warm_up(db: NavDatabase | NavDatabaseSet, *, reverse: bool = False) -> None:
     stars with each method, so that numba's kernels are compiled (or loaded from its on-disk
     cache) and the first request of a server worker is as fast as the rest.
 
-    ``reverse``: the steps in the opposite order. A second process warming up the same database
-    on a fresh install compiles the kernels the first one reaches last, and each loads the
-    other's from numba's cache (``.ci/run``: ~3 min of compiling on one core of a 2-core VM)."""
+    ``reverse``: for a second process warming up the same database on a fresh install
+    (``.ci/run``). It compiles the finish of a proven answer (:func:`_settle`) and the compiled
+    fallbacks (:func:`_fallbacks`) first, while the first process compiles quad's search and the
+    first pass, then the rest in the opposite order; each loads the other's kernels from
+    numba's cache. One process alone compiles for ~135 s on this 2-core VM; the two together
+    took 114-120 s when the second simply ran the steps backwards (both compiled the finish at
+    once, ~35 s into the first pass) and 95-97 s in this order (``/work/s28/pair_warm.sh``)."""
     db.__dict__["_warm"] = True
     map_pages(db)
     members = list(db.members.values()) if isinstance(db, NavDatabaseSet) else [db]
     for member in members:
         member.__dict__["_warm"] = True
-    steps = [*(partial(_methods, member) for member in members), partial(_auto, db, members),
-             partial(_rigs, db, members), partial(_screens, members)]
-    for step in reversed(steps) if reverse else steps:
+    if not reverse:
+        steps = [*(partial(_methods, member) for member in members), partial(_auto, db, members),
+                 partial(_rigs, db, members), partial(_screens, members)]
+    else:  # the finish of a proven answer first (the forward order reaches it inside the compiled
+        # first pass after quad's search, ~35 s in: both processes compiled it at once), then
+        # what the forward order reaches last
+        steps = [partial(_settle, db, members[0]), partial(_fallbacks, db, members[0]),
+                 partial(_screens, members), partial(_rigs, db, members), partial(_auto, db, members),
+                 *(partial(_methods, member) for member in reversed(members))]
+    for step in steps:
         step()
+
+
+def _fallbacks(db: NavDatabase | NavDatabaseSet, member: NavDatabase) -> None:
+    """The compiled fallbacks (:func:`~.fallback_pass.fallbacks`: quad's search on the other
+    members, then ``maxangle``'s) called as the pipeline calls them after a first pass that
+    proved nothing, on 8 random points of ``member``'s field."""
+    camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
+    rng = np.random.default_rng(0)
+    frame = Centroids(rng.uniform(0, 1023, (8, 2)), rng.uniform(1, 100, 8))
+    obs = _observation([(frame, camera, None)], _ONE_CAMERA)
+    plan = search_plan(db, [camera], "auto", 1.0)[0]
+    options = SolveOptions()
+    fallbacks(obs, plan, 0, FEW_STARS_MAX_TRIALS, 1.0, None, options.max_false_prob, options.max_stars,
+              math.inf, len(obs) <= QUERY_STARS)
+
+
+def _settle(db: NavDatabase | NavDatabaseSet, member: NavDatabase) -> None:
+    """The compiled finish of an answer a fallback proved (:func:`~.first_pass.settle`), on a
+    frame of ``member``'s own stars with its true pairs."""
+    camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
+    row = int(np.argmin(np.asarray(member.stars.mag)))
+    frame, rows, r = _own_frame(member, camera, row)
+    deepest = search_plan(db, [camera], "auto", 1.0)[1]
+    obs = _observation([(frame, camera, None)], _ONE_CAMERA)  # brightest first: the frame's order
+    found = Verified(np.arange(len(rows), dtype=np.int64), rows, r, 1e-20, 1)
+    settle(obs, member, deepest, found, 1.0, None, Verifier.strong_false_prob)
 
 
 def _methods(member: NavDatabase) -> None:
@@ -173,17 +212,22 @@ def _screens(members: list[NavDatabase]) -> None:
 def own_frames(db: NavDatabase, camera: Camera, n_tries: int = 4) -> list[Centroids]:
     """Noise-free frames of ``db``'s own brightest stars around a few of them (for
     :func:`warm_up`)."""
+    mag = np.asarray(db.stars.mag, dtype=np.float64)
+    return [_own_frame(db, camera, int(row))[0] for row in np.argsort(mag)[: 50 : 50 // n_tries]]
+
+
+def _own_frame(db: NavDatabase, camera: Camera, row: int) -> tuple[Centroids, np.ndarray, np.ndarray]:
+    """A noise-free frame of ``db``'s brightest stars around star ``row``, brightest first; the
+    star rows of its centroids and its attitude (ICRS -> camera, 3x3)."""
     stars = db.stars
     mag = np.asarray(stars.mag, dtype=np.float64)
-    frames = []
-    for row in np.argsort(mag)[: 50 : 50 // n_tries]:
-        v = np.asarray(stars.vec[row], dtype=np.float64)
-        ra = math.degrees(math.atan2(v[1], v[0])) % 360
-        dec = math.degrees(math.asin(max(-1.0, min(1.0, v[2]))))
-        r = matrix_from_radec_roll(ra, dec, 0.0)
-        near = np.asarray(star_tree(db).query_ball_point(v, math.radians(camera.diagonal_fov_deg)), dtype=np.int64)
-        xy, inside = camera.vector_to_pixel(np.asarray(stars.vec[near]) @ r.T)
-        near, xy = near[inside], xy[inside]
-        order = np.argsort(mag[near])[:20]
-        frames.append(Centroids(xy[order], 10.0 ** (-0.4 * mag[near][order])))
-    return frames
+    v = np.asarray(stars.vec[row], dtype=np.float64)
+    ra = math.degrees(math.atan2(v[1], v[0])) % 360
+    dec = math.degrees(math.asin(max(-1.0, min(1.0, v[2]))))
+    r = matrix_from_radec_roll(ra, dec, 0.0)
+    reach = math.radians(camera.diagonal_fov_deg)
+    near = np.asarray(star_tree(db).query_ball_point(v, reach), dtype=np.int64)
+    xy, inside = camera.vector_to_pixel(np.asarray(stars.vec[near]) @ r.T)
+    near, xy = near[inside], xy[inside]
+    order = np.argsort(mag[near])[:20]
+    return Centroids(xy[order], 10.0 ** (-0.4 * mag[near][order])), near[order], r

@@ -11,10 +11,11 @@ and a sensor's nominal pitch are rarely better than 1-2%, and ``skyfix calibrate
 from them. Given ``SolveOptions.fov_max_error_deg``, :func:`solve_uncertain_fov`:
 
 1. solves with the camera as given (with ``auto``: its ``quad`` pass);
-2. if that proves nothing, or pairs fewer than half the centroids (:data:`FEW_PAIRED_SHARE`:
-   then the answer that pairs more stars is kept), solves again at focal lengths stepped through the range the error
-   allows, nearest first (:func:`focal_ladder`: each step at most one match radius at the
-   image corner, so a step's worst focal error moves a corner star by half a radius); then,
+2. if that proves nothing, or its answer refitted (step 3) pairs fewer than half the
+   centroids (:data:`FEW_PAIRED_SHARE`: then the answer that pairs more stars is kept), solves
+   again at focal lengths stepped through the range the error allows, nearest first
+   (:func:`focal_ladder`: each step at most one match radius at the image corner, so a step's
+   worst focal error moves a corner star by half a radius); then,
    with ``auto``, the camera as given with every method (the fallbacks prove 3-4-star frames;
    run first, with a wrong field they ran a 20-deg camera's frame to the time limit);
 3. fits the focal length to the identified stars (:func:`fit_focal`, closed form: the
@@ -63,12 +64,13 @@ MIN_SPREAD_PX = 0.3
 """The robust spread's floor, px (a handful of stars can agree to a few hundredths of a pixel)."""
 FEW_PAIRED_SHARE = 0.5
 """An answer proven with the camera as given that pairs fewer than this share of the frame's
-centroids is checked against the focal ladder: the ladder's answer is taken where it pairs more
-stars. A field told 1-2% too wide still proved some frames with the stars near the centre, whose
-fit does not fix the scale, and there one star was named after its neighbour (seed 000's camera
-at +2%: 6 of 19 centroids paired, one wrong; the true field pairs 12). Right answers with the
-true field pair 44-100% of the centroids (median 85%; seeds 000, 001, 004 at 1 px with 2 false
-stars, 100 frames each; ``/work/s28/fov_frac.py``), with a field 1% off 13-40%."""
+centroids, after its own refit, is checked against the focal ladder: the ladder's answer is
+taken where it pairs more stars. A field told 1-2% too wide still proved some frames with the
+stars near the centre, whose fit does not fix the scale, and there one star was named after
+its neighbour (seed 000's camera at +2%: 6 of 19 centroids paired, one wrong; the true field
+pairs 12). Right answers with the true field pair 44-100% of the centroids (median 85%; seeds
+000, 001, 004 at 1 px with 2 false stars, 100 frames each; ``/work/s28/fov_frac.py``), with a
+field 1% off 13-40%."""
 REFIT_ROUNDS = 6
 """Fit-then-solve rounds at most after a step proves the frame: each solve refits the attitude to
 the new focal length and pairs more stars. Most frames settle in one or two; a 20-deg camera's
@@ -99,11 +101,13 @@ def solve_uncertain_fov(centroids: Centroids, camera: Camera, db: NavDatabase | 
     # the ladder: with a wrong field they are what costs (a 20-deg camera 3% off: maxangle's
     # hypotheses ran to the 500-ms limit and left no time for the ladder)
     first = solve(centroids, camera, db, method=sweep_method, hint=hint, options=plain)
-    if first.solved and len(first.stars) >= FEW_PAIRED_SHARE * len(centroids):
-        return _finish(first, centroids, camera, db, method, hint, plain, t0)
-    if len(centroids) < 3 or first.reason is NoSolutionReason.CAMERA_OUTSIDE_DATABASE:
+    given = None  # the camera as given's answer, refitted, where it pairs few of the stars
+    if first.solved:
+        given = _finish(first, centroids, camera, db, method, hint, plain, t0)
+        if len(given.stars) >= FEW_PAIRED_SHARE * len(centroids):
+            return given
+    elif len(centroids) < 3 or first.reason is NoSolutionReason.CAMERA_OUTSIDE_DATABASE:
         return _stamp(first, t0)
-    given = first if first.solved else None  # proven, but pairing few of the stars: the ladder too
     radius = plain.match_radius_px or max(2.5, 3.0 * plain.centroid_sigma_px)
     # (steps of a wider radius, with a wider centroid error, were tried: fewer steps, but each
     # proves less and costs more; seed 000's camera at +1-9%: 37 of 40 frames against 39)
@@ -125,7 +129,7 @@ def solve_uncertain_fov(centroids: Centroids, camera: Camera, db: NavDatabase | 
             if fitted is not None:
                 break  # a focal length of the range proves no more than the camera as given
     if given is not None:
-        return _finish(given, centroids, camera, db, method, hint, plain, t0)
+        return _stamp(given, t0)
     left_ms = (deadline - time.perf_counter()) * 1e3
     if sweep_method != method and left_ms > 0:  # the camera as given, every method (a 3-4-star frame)
         rest = replace(plain, timeout_ms=left_ms)

@@ -87,14 +87,15 @@ class Chain(NamedTuple):
     unprovable: list[str]
 
 
-def fallback_passes(plan: list[tuple[NavDatabase, list[str]]], small: bool = True
-                    ) -> list[tuple[NavDatabase, int]] | None:
+def fallback_passes(plan: list[tuple[NavDatabase, list[str]]], small: bool = True,
+                    first_quad_only: bool = False) -> list[tuple[NavDatabase, int]] | None:
     """The passes the general loop runs after the first member's exhaustive ``quad`` miss, if
     every ``quad`` pass after it misses exhaustively too: ``(member, kind)``; on a ``small``
     frame (5 to ``QUERY_STARS`` stars) each member's first fallback right after its ``quad``
     (``pipeline.SMALL_FRAME_FALLBACK_FIRST``), on a larger one in the plan's order (every
     ``quad``, then the fallbacks). None for a plan this call does not take (more than two
-    members, a first fallback other than ``maxangle``)."""
+    members, a first fallback other than ``maxangle``). ``first_quad_only``: no later member's
+    ``quad`` pass (``pipeline.FIRST_QUAD_ONLY_STARS``)."""
     order = list(plan)
     first = order[0][0]
     if small:
@@ -110,6 +111,8 @@ def fallback_passes(plan: list[tuple[NavDatabase, list[str]]], small: bool = Tru
             passes.append((member, KIND_MAXANGLE))
         else:
             return None
+    if first_quad_only:
+        passes = [(m, kind) for m, kind in passes if kind != KIND_QUAD]
     if not passes or len({id(m) for m, _ in passes} | {id(first)}) > 2:
         return None
     if any(("maxangle" if kind == KIND_MAXANGLE else "quad") not in m.tables for m, kind in passes):
@@ -119,7 +122,7 @@ def fallback_passes(plan: list[tuple[NavDatabase, list[str]]], small: bool = Tru
 
 def fallbacks(obs: Observation, plan: list[tuple[NavDatabase, list[str]]], trials: int, few_trials: int,
               sigma_px: float, match_radius_px: float | None, max_false_prob: float, max_stars: int,
-              deadline: float, small: bool = True) -> Chain | None:
+              deadline: float, small: bool = True, first_quad_only: bool = False) -> Chain | None:
     """The fallback passes of ``plan`` (:func:`fallback_passes`, on a ``small`` frame or a
     larger one) on ``obs`` after ``trials`` hypotheses of the first pass, the budget
     ``few_trials`` hypotheses from the first fallback (``pipeline.FEW_STARS_MAX_TRIALS``, or
@@ -130,7 +133,7 @@ def fallbacks(obs: Observation, plan: list[tuple[NavDatabase, list[str]]], trial
     cam = obs.cameras[0]
     scale = obs.pixel_scale_rad
     radius = match_radius_px or max(2.5, 3.0 * sigma_px)
-    setup = _setup(plan, cam, float(radius), small)
+    setup = _setup(plan, cam, float(radius), small, first_quad_only)
     if setup is None:
         return None
     passes, kinds, members, static = setup
@@ -158,18 +161,19 @@ def fallbacks(obs: Observation, plan: list[tuple[NavDatabase, list[str]]], trial
 SETUP_CACHE_SIZE = 64
 
 
-def _setup(plan: list[tuple[NavDatabase, list[str]]], cam: Any, radius_px: float, small: bool
+def _setup(plan: list[tuple[NavDatabase, list[str]]], cam: Any, radius_px: float, small: bool,
+           first_quad_only: bool = False
            ) -> tuple[list[tuple[NavDatabase, int]], np.ndarray, np.ndarray, tuple[Any, ...]] | None:
     """The passes of ``plan`` (:func:`fallback_passes`) as the kernel takes them: kinds and
     members, and every member's arrays; kept per plan, frame size class, camera and match radius
     (px) on the first member (every frame of a camera asks the same; building them costs ~5 us)."""
     first = plan[0][0]
     cache = first.__dict__.setdefault("_chain_setup", {})
-    key = (id(plan), small, cam.diagonal_fov_deg, cam.pixel_scale_rad, radius_px)
+    key = (id(plan), small, first_quad_only, cam.diagonal_fov_deg, cam.pixel_scale_rad, radius_px)
     got = cache.get(key)
     if got is not None and got[0] is plan:
         return got[1]
-    passes = fallback_passes(plan, small)
+    passes = fallback_passes(plan, small, first_quad_only)
     setup = None
     if passes is not None:
         second = next((m for m, _ in passes if m is not first), first)

@@ -150,6 +150,16 @@ points; a 4-star frame's bound allows one or two hypotheses on the deeper, dense
 ~0.11 ms of every 4-star frame that ``sparse`` leaves (``/work/s25/who.py``). The general loop
 (written as a flag so that a test can compare the two)."""
 
+FIRST_QUAD_ONLY_STARS = 6
+"""Frames of at most this many stars run ``quad`` on the plan's first member only (the first
+pass); the later members' fallbacks still run (in the compiled chain and the general loop). Seed
+002's unsolved 5-6-star frames spent 0.03-0.045 ms in ``narrow``'s ``quad`` after ``sparse``'s
+(``/work/s27/who57.py``), which proved none of them: the same stars and attitude on every one of
+bench_wrong's 47,952 seed 002 frames (seeds 3, 7, 11) and 63,936 of the other four cameras (seed
+7) with it at 4 and at 6 (``/work/s28/dump_one.py``); the benchmark's seed 002 sweeps 1-4%
+faster in the mean (``/work/s28/ab_quad.py``). ``narrow``'s ``maxangle`` stays: without it 3
+of 31,968 frames were lost."""
+
 SPARSE_PROOF_METHODS = frozenset({"triangle", "multifov"})
 """Methods that can prove a frame of fewer stars than the verifier's ``min_matches`` (4): the
 verifier needs a pair beyond the pattern, so only ``triangle``'s unique-triangle proof
@@ -327,7 +337,7 @@ def solve_rig(
             # the first pass looked up every pattern: the fallbacks in one compiled call too
             chain = fallbacks(obs, plan, fp.trials, FEW_STARS_MAX_TRIALS if few else MANY_STARS_MAX_TRIALS,
                               sigmas[0], options.match_radius_px, options.max_false_prob, options.max_stars,
-                              deadline, few)
+                              deadline, few, method == "auto" and len(obs) <= FIRST_QUAD_ONLY_STARS)
     # every pass (member of a database set, retry sigma) adds its hypotheses to the trials that
     # the coincidence bound is multiplied by
     misses: list[bool] = []  # per quad pass: did it look up every pattern and prove none?
@@ -342,10 +352,14 @@ def solve_rig(
             db = chain.member
     one_fallback = (SPARSE_FRAME_ONE_MEMBER and method == "auto" and len(obs) < QUAD_MIN_STARS
                     and len(obs.cameras) == 1)
+    quad_once = (method == "auto" and QUAD_MIN_STARS <= len(obs) <= FIRST_QUAD_ONLY_STARS
+                 and len(obs.cameras) == 1)
     for sigma in sigmas if chain is None else ():
         order = list(plan)
         fallen_back: NavDatabase | None = None  # the member whose fallbacks ran first on this frame
         for i, (member, methods) in enumerate(order):
+            if quad_once and i > 0 and methods == ["quad"]:
+                continue  # a frame of at most 6 stars: the first member's quad only (FIRST_QUAD_ONLY_STARS)
             if "quad" not in methods:
                 if one_fallback and fallen_back is not None and member is not fallen_back:
                     continue  # a 3-4-star frame: the first member's fallbacks only (SPARSE_FRAME_ONE_MEMBER)

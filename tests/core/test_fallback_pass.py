@@ -127,3 +127,43 @@ def test_a_quad_pass_short_of_its_patterns_hands_the_frame_back(monkeypatch, def
     monkeypatch.setattr(fallback_pass, "MAX_PROBES", -1)
     assert fallbacks(*args) is None
     assert fallbacks(*args[:-1], time.perf_counter()) is None  # no time left: the loop, which checks the clock
+
+
+def test_a_frame_of_at_most_6_stars_runs_quad_on_the_first_member_only(default_set_db) -> None:
+    """``pipeline.FIRST_QUAD_ONLY_STARS``: the later members' ``quad`` passes drop out of the
+    chain; their fallbacks stay."""
+    plan, _ = search_plan(default_set_db, [PRESETS["seed002"].camera], "auto", 0.5)
+    names = [(m.path.name, kind) for m, kind in fallback_passes(plan, first_quad_only=True)]
+    assert names == [("sparse", KIND_MAXANGLE), ("narrow", KIND_MAXANGLE)]
+    plan, _ = search_plan(default_set_db, [PRESETS["seed001"].camera], "auto", 0.5)
+    names = [(m.path.name, kind) for m, kind in fallback_passes(plan, first_quad_only=True)]
+    assert names == [("mid", KIND_MAXANGLE)]
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_5_6_star_frames_answer_as_with_every_members_quad(default_set_db, monkeypatch, compiled) -> None:
+    """Seed 002's 5-6-star frames (1 px, 1-2 false stars, magnitude noise): the same answers
+    with the later members' ``quad`` passes (``FIRST_QUAD_ONLY_STARS = 4``, as before session 27)
+    and without them, in the compiled chain and in the general loop (47,952 frames of
+    bench_wrong's grid, seeds 3, 7 and 11: the same stars and attitudes)."""
+    p = PRESETS["seed002"]
+    monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", compiled)
+    options = SolveOptions(centroid_sigma_px=1.0)
+    frames = [f for false in (1, 2) for f in simulate_frames(
+        p.camera, 60, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0, false_stars=false,
+                                mag_noise=0.3), rng=70 + false) if 5 <= len(f.centroids) <= 6]
+    assert len(frames) >= 20
+    answers, chains = {}, {}
+    for flag in (4, 6):
+        monkeypatch.setattr(pipeline, "FIRST_QUAD_ONLY_STARS", flag)
+        chains[flag] = _counting(monkeypatch)
+        answers[flag] = [solve(f.centroids, p.camera, default_set_db, options=options) for f in frames]
+    if compiled:  # narrow's quad ran in the chain before, and no longer
+        assert any("quad" in c.tried for c in chains[4] if c is not None)
+        assert not any("quad" in c.tried for c in chains[6] if c is not None)
+    for before, after in zip(answers[4], answers[6], strict=True):
+        assert before.solved == after.solved
+        assert [s.hip for s in before.stars] == [s.hip for s in after.stars]
+        assert before.quaternion == after.quaternion
+    assert any("quad" in s.methods_tried and "maxangle" in s.methods_tried for s in answers[6])
+    assert sum(s.solved for s in answers[6]) >= 3

@@ -25,7 +25,7 @@ from .plan import RIG_METHOD, search_plan
 from .sparse_proof import warm_up_screens
 from .star_index import FIELD_CELL_DEG, field_grid, sky_grid, star_tree
 from .types import Centroids, SolveStatus
-from .verify import Verified, Verifier
+from .verify import Verified
 
 MADV_POPULATE_READ = 22
 """Linux (5.14 and later): fault a mapping's pages in, as reads (Python names it from 3.12)."""
@@ -133,7 +133,7 @@ def _settle(db: NavDatabase | NavDatabaseSet, member: NavDatabase) -> None:
     deepest = search_plan(db, [camera], "auto", 1.0)[1]
     obs = _observation([(frame, camera, None)], _ONE_CAMERA)  # brightest first: the frame's order
     found = Verified(np.arange(len(rows), dtype=np.int64), rows, r, 1e-20, 1)
-    settle(obs, member, deepest, found, 1.0, None, Verifier.strong_false_prob)
+    settle(obs, member, deepest, found, 1.0, None, SolveOptions().max_false_prob)
 
 
 def _methods(member: NavDatabase) -> None:

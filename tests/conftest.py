@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from service.core._cores import usable_cores
 from service.core.camera import Camera
 from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
 
@@ -26,8 +26,7 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
     """``-n auto`` (the default, pyproject.toml): one test worker a core, at most 4. Each worker
     builds the session's databases for itself, so more would cost memory and build time for
     little gain; a test file runs whole on one worker (``--dist loadfile``)."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return max(1, min(4, cores))
+    return max(1, min(4, usable_cores()))
 
 
 def seed000_config(methods: tuple[str, ...] = ("pyramid", "maxangle")) -> BuildConfig:

@@ -20,6 +20,7 @@ from typing import Any
 
 import orjson
 
+from ._cores import usable_cores
 from .camera import Camera
 from .errors import InvalidInputError, SkyfixError
 from .navdb.reader import NavDatabase, NavDatabaseSet
@@ -169,13 +170,9 @@ def solve_iter(frames: Iterable[Item], db: NavDatabase | NavDatabaseSet, *, meth
     stopped when the generator ends or is closed (a caller solving block after block keeps
     one :class:`SolvePool` instead)."""
     todo = list(frames)
-    with SolvePool(db, method=method, options=options, workers=min(workers or _cores(), len(todo) or 1),
+    with SolvePool(db, method=method, options=options, workers=min(workers or usable_cores(), len(todo) or 1),
                    then=then, return_errors=return_errors, pool=pool) as solver:
         yield from solver.imap(todo)
-
-
-def _cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 class SolvePool:
@@ -198,7 +195,7 @@ class SolvePool:
             raise ValueError(f"pool must be 'process' or 'thread', not {pool!r}")
         if not db.__dict__.get("_warm"):
             warm_up(db)  # once, before any worker exists
-        self.workers = max(1, workers or _cores())
+        self.workers = max(1, workers or usable_cores())
         self._task = _make_task(db, method, options, then, return_errors)
         self._procs: ProcessPoolExecutor | None = None
         self._threads: ThreadPoolExecutor | None = None

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._cores import usable_cores
 from ..catalog import CATALOGUE_NAME, StarTable, load_hipparcos, select_stars
 from ..errors import InvalidInputError
 from .format import (
@@ -146,7 +147,7 @@ def build_database_set(
         # the deepest member first (the narrow one: half the default set's time); the others
         # share the remaining threads. The build's kernels and numpy's sorts release the GIL.
         order = sorted(members, key=lambda n: -members[n].mag_limit)
-        with ThreadPoolExecutor(max_workers=min(len(members), build_threads())) as pool:
+        with ThreadPoolExecutor(max_workers=min(len(members), usable_cores())) as pool:
             jobs = {n: pool.submit(_write_member, tmp / n, members[n], member_progress(n)) for n in order}
             built = {n: jobs[n].result() for n in members}
         listing = {n: {"fov_min_deg": m["fov_min_deg"], "fov_max_deg": m["fov_max_deg"],
@@ -156,11 +157,6 @@ def build_database_set(
                                      "members": listing, **(manifest_extra or {})})
     progress("done", 1.0)
     return out
-
-
-def build_threads() -> int:
-    """Threads that build a set's members at once: the cores this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 @contextmanager

@@ -139,7 +139,7 @@ def test_a_set_built_on_threads_equals_its_members_built_one_by_one(tmp_path: Pa
                                      methods=("quad", "maxangle")),
                "wide": BuildConfig(fov_max_deg=30.0, fov_min_deg=6.0, mag_limit=4.5, epoch=2026.0,
                                    methods=("quad", "pyramid"))}
-    monkeypatch.setattr(builder, "build_threads", lambda: 2)  # threads even on a 1-core runner
+    monkeypatch.setattr(builder, "usable_cores", lambda: 2)  # threads even on a 1-core runner
     seen: list[float] = []
     path = build_database_set(tmp_path / "set", members, progress=lambda stage, frac: seen.append(frac))
     assert seen == sorted(seen) and seen[-1] == 1.0 and len(seen) > 4

@@ -281,7 +281,9 @@ def least_extras(n_free: int, pair_p: float, trials: int, max_false_prob: float,
 NEED_MAX_UNSCREENED = 2
 """:func:`needed_hits` asks its hits only of frames with at most this many stars beyond those the
 screen looks at: on a bigger frame the stars it skips could supply the extra pairs, and the
-bound's sum (~1.5 us on 27 free stars) would be paid on every check."""
+bound's sum (~1.5 us on 27 free stars) would be paid on every screened candidate. A bigger
+frame's candidate that passed the screen is asked instead, just before its check, whether all
+its stars could supply them (:func:`~service.core.screen.could_pass_bound`, since session 28)."""
 
 
 @njit(cache=True, nogil=True)

@@ -30,9 +30,17 @@ from scipy.special import betainc
 
 from .attitude import ARCSEC_PER_RAD, wahba_kernel, wahba_svd
 from .camera import Camera
-from .match import IDENTITY_MOUNTING, RigArrays, match_rig, needed_hits, refine, rig_arrays
+from .match import (
+    IDENTITY_MOUNTING,
+    NEED_MAX_UNSCREENED,
+    RigArrays,
+    match_rig,
+    needed_hits,
+    refine,
+    rig_arrays,
+)
 from .navdb.reader import NavDatabase
-from .screen import hits_under, screen_hits
+from .screen import could_pass_bound, hits_under, screen_hits
 from .star_index import sky_grid, sky_mask, star_tree, star_vec64
 from .types import FloatArray, IntArray
 
@@ -242,6 +250,9 @@ class Verifier:
             if hits[row] < need and self._wide_hits(obs_tris[row], cands[row], others, need) < need:
                 self.trials += 1  # a trial all the same, as check() would count it
                 continue  # too few stars even in the wide screen to pass the bound
+            if not self._could_pass(obs_tris[row], cands[row], len(others)):
+                self.trials += 1  # a trial all the same, as check() would count it
+                continue  # a big frame: too few of all its stars in the wide screen
             found = self.check(obs_tris[row], cands[row])
             if found is not None:
                 return found
@@ -267,6 +278,26 @@ class Verifier:
         return int(hits_under(np.ascontiguousarray(self.obs.vec, dtype=np.float64), o, r, len(others), chord, enough,
                               int(c[0]), int(c[1]), int(c[2]), g.cell, g.n_side, g.keys, g.starts, g.stars, stars,
                               g.columns))
+
+    def _could_pass(self, obs_tri: IntArray, cand: IntArray, n_screened: int) -> bool:
+        """:func:`~service.core.screen.could_pass_bound` of one candidate, as ``maxangle``'s
+        compiled search calls it: every observed star at the check's starting attitude (Wahba's
+        on the candidate's three stars) and the wide screen's chord, against the extra pairs the
+        check after this one would need (a frame of one camera; True for a rig's)."""
+        if len(self.obs) <= n_screened + NEED_MAX_UNSCREENED or len(self.obs.cameras) != 1:
+            return True
+        stars = star_vec64(self.db)
+        o = np.asarray(obs_tri, dtype=np.int64)
+        c = np.asarray(cand, dtype=np.int64)
+        r = wahba_kernel(np.ascontiguousarray(self.obs.vec[o], dtype=np.float64), stars[c], np.ones(len(o)))
+        g = sky_grid(self.db)
+        cam = self.obs.cameras[0]
+        chord = NEED_SCREEN_FACTOR * 1.5 * self.match_radius_px * self.obs.pixel_scale_rad
+        return bool(could_pass_bound(np.ascontiguousarray(self.obs.vec, dtype=np.float64), o, r, n_screened, chord,
+                                     float(self.match_radius_px), float(cam.width) * float(cam.height),
+                                     self.trials + 1, float(self.max_false_prob), int(self.min_matches), int(c[0]),
+                                     int(c[1]), int(c[2]), g.cell, g.n_side, g.keys, g.starts, g.stars, stars,
+                                     g.columns))
 
     def _screen(self, obs_tris: IntArray, cands: IntArray, others: IntArray) -> IntArray:
         """Hits per candidate: ``others`` (observed rows not in its triangle) that land near a

@@ -212,21 +212,13 @@ def test_least_extras_at_4096_px_asks_two_stars_beyond_a_triangle_of_six() -> No
     assert least_extras(1, pair_p, 3, 1e-5, 4) == 2  # none: could_prove(3) is False there too
 
 
-def test_a_candidate_that_cannot_pass_the_bound_is_counted_not_checked(default_set_db, monkeypatch) -> None:
-    """A candidate whose screens (1.5 and NEED_SCREEN_FACTOR x 1.5 match radii) find fewer stars
-    than a check would need to pass the bound is not checked, but counts as a trial: on seed 002's
-    6-star frames with 2 false stars (4096 px, where a triangle and one star never pass) the
-    Python loop checks fewer candidates, with the same answers and the same trial counts."""
+def _with_and_without(monkeypatch, camera, db, opts, frames, ungate):
+    """Each frame solved through the Python loop (whose checks can be seen) with a gate, then
+    again after ``ungate()`` removes it: ``(answers, checks)`` of each run."""
     import service.core.methods.maxangle as maxangle
-    import service.core.verify as verify
 
-    p = PRESETS["seed002"]
-    opts = SolveOptions(centroid_sigma_px=0.5)
-    frames = [f for f in simulate_frames(p.camera, 600, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=0.5,
-                                                                   false_stars=2), rng=31)
-              if len(f.centroids) == 6][:25]
     monkeypatch.setattr(maxangle, "COMPILED_SEARCH", False)
-    monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", False)  # the Python loop, whose checks can be seen
+    monkeypatch.setattr(pipeline, "COMPILED_FALLBACKS", False)
     checks = [0]
     real_check = Verifier.check
 
@@ -235,16 +227,52 @@ def test_a_candidate_that_cannot_pass_the_bound_is_counted_not_checked(default_s
         return real_check(self, obs_idx, cat_idx, **kw)
 
     monkeypatch.setattr(Verifier, "check", check)
-    runs = {}
+    runs = []
     for gate in (True, False):
         if not gate:
-            monkeypatch.setattr(verify, "needed_hits", lambda *a: 0)
+            ungate()
         checks[0] = 0
-        runs[gate] = ([solve(f.centroids, p.camera, default_set_db, options=opts) for f in frames], checks[0])
-    (gated, n_gated), (plain, n_plain) = runs[True], runs[False]
-    assert n_gated < n_plain / 2
-    for a, b in zip(gated, plain, strict=True):
+        runs.append(([solve(c, camera, db, options=opts) for c in frames], checks[0]))
+    for a, b in zip(runs[0][0], runs[1][0], strict=True):
         assert (a.solved, a.message, [s[:2] for s in a.stars]) == (b.solved, b.message, [s[:2] for s in b.stars])
+    return runs
+
+
+def test_a_candidate_that_cannot_pass_the_bound_is_counted_not_checked(default_set_db, monkeypatch) -> None:
+    """A candidate whose screens (1.5 and NEED_SCREEN_FACTOR x 1.5 match radii) find fewer stars
+    than a check would need to pass the bound is not checked, but counts as a trial: on seed 002's
+    6-star frames with 2 false stars (4096 px, where a triangle and one star never pass) the
+    Python loop checks fewer candidates, with the same answers and the same trial counts."""
+    import service.core.verify as verify
+
+    p = PRESETS["seed002"]
+    frames = [f.centroids for f in simulate_frames(p.camera, 600, SimConfig(mag_limit=p.mag_limit,
+                                                                            centroid_noise_px=0.5, false_stars=2),
+                                                   rng=31) if len(f.centroids) == 6][:25]
+    (_, n_gated), (_, n_plain) = _with_and_without(monkeypatch, p.camera, default_set_db,
+                                                   SolveOptions(centroid_sigma_px=0.5), frames,
+                                                   lambda: monkeypatch.setattr(verify, "needed_hits", lambda *a: 0))
+    assert n_gated < n_plain / 2
+
+
+def test_a_big_frames_candidate_too_few_of_whose_stars_land_is_counted_not_checked(default_set_db,
+                                                                                   monkeypatch) -> None:
+    """On a frame of more stars than ``needed_hits`` screens (seed 003's camera, 20 deg: random
+    points, and frames at 1 px with 5 false stars), a candidate with a screen hit is checked only
+    if every other observed star, in the wide screen at the check's starting attitude, could
+    supply the pairs the bound needs (``screen.could_pass_bound``): the Python loop checks far
+    fewer candidates, with the same answers and the same trial counts (in the messages)."""
+    from service.core.sim import random_points
+
+    p = PRESETS["seed003"]
+    rng = np.random.default_rng(8)
+    sim = simulate_frames(p.camera, 40, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0, false_stars=5), rng=9)
+    frames = [random_points(p.camera, int(n), rng) for n in rng.integers(14, 40, 12)] + [f.centroids for f in sim]
+    (gated, n_gated), (_, n_plain) = _with_and_without(
+        monkeypatch, p.camera, default_set_db, SolveOptions(centroid_sigma_px=1.0), frames,
+        lambda: monkeypatch.setattr(Verifier, "_could_pass", lambda self, *a: True))
+    assert n_gated < n_plain / 2
+    assert sum(s.solved for s in gated) >= 30
 
 
 def test_the_wide_screen_starts_from_the_checks_attitude(default_set_db, monkeypatch) -> None:

@@ -32,7 +32,7 @@ from numba import njit
 from ..attitude import wahba_kernel
 from ..check_kernel import keep_marginal, names_marginal, verify_pairs
 from ..match import needed_hits
-from ..screen import _screen, hits_under
+from ..screen import _screen, could_pass_bound, hits_under
 from ..star_index import field_grid, sky_grid, sky_mask, star_vec64
 from ..verify import CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_SCREEN_FACTOR, Verified
 from .base import SolveContext
@@ -144,6 +144,10 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
             if hits[row] < need and hits_under(obs_vec, o, r, n_others, wide_chord, need, c[0], c[1], c[2], s_cell,
                                                s_side, s_keys, s_starts, s_stars, star_vec, s_columns) < need:
                 continue  # too few stars even in the wide screen to pass the bound (NEED_SCREEN_FACTOR)
+            if not could_pass_bound(obs_vec, o, r, n_others, wide_chord, radius_px, cams[0, 3] * cams[0, 4], trials,
+                                    max_false_prob, 4, c[0], c[1], c[2], s_cell, s_side, s_keys, s_starts, s_stars,
+                                    star_vec, s_columns):
+                continue  # a big frame: too few of all its stars in the wide screen (screen.could_pass_bound)
             near_state[0] = 0.0  # a fresh gathering, as each Verifier.check's own call does
             ok, m_obs, m_cat, r, prob = verify_pairs(obs_vec, obs_xy, star_vec, o.copy(), c.copy(), r, g_cell,
                                                      g_side, g_keys, g_starts, g_stars, g_columns, near_chord,

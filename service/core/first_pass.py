@@ -37,6 +37,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
+from ._entry import EntryCall, plain
 from .answer import FIELD_MARGIN_DEG, answer_kernel, star_mags
 from .attitude import PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
 from .camera import brightest_first
@@ -298,7 +299,8 @@ def settle(obs: Observation, member: NavDatabase, deepest: NavDatabase, found: V
     where the general path must re-examine the fit (``trimmed_basin``)."""
     k = obs.kernel_arrays
     flux = obs.flux if obs.flux is not None else _NO_FLUX
-    ok, used_deep, ints, floats = settle_kernel(
+    call = _SETTLE if plain(obs.vec, obs.xy, flux, obs.index) else settle_kernel  # (_entry)
+    ok, used_deep, ints, floats = call(
         obs.vec, obs.xy, flux, obs.flux is not None, k.mounts, k.cams, k.dist, k.rows, k.row_off, obs.index,
         np.array(found.obs, np.int64), np.array(found.cat, np.int64), np.array(found.matrix, np.float64),
         float(found.false_prob), int(found.n_trials),
@@ -427,3 +429,7 @@ def settle_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row
     floats[14:14 + n] = res
     floats[14 + n:] = a_floats
     return True, used_deep, ints, floats
+
+
+_SETTLE = EntryCall(settle_kernel)
+"""``settle_kernel`` past the dispatcher once its signature is known (:mod:`._entry`)."""

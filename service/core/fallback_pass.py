@@ -235,6 +235,12 @@ def _chunk_bounds(total):
     return out
 
 
+_FIRST_CHUNK = np.int64(0)
+"""``search_chunks``' first chunk, as an int64: a literal ``0`` there made numba compile a second
+signature of that big kernel (``Literal[int](0)`` where the Python path passes an int64), ~10 s
+more on an empty cache (tests/core/test_compile_signatures.py on a cold cache)."""
+
+
 @njit(cache=True, nogil=True)
 def _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, limit, n_tri, tri, tri_ext, tol,
                    radius_px,
@@ -260,8 +266,8 @@ def _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, l
     state = np.array([trials, 0, -1, 0, STOP_NONE], np.int64)
     n_others = min(n_obs, screen_stars + 3)
     found, m_obs, m_cat, r, prob, _ = search_chunks(
-        obs_vec, obs_xy, labels[:n_first], sides[:n_first], theta[:n_first], tol_t[:n_first], bounds, 0, n_chunks,
-        tol, n_others, mounts, cams, dist, rows, row_off, state, limit, confirm_patterns, max_false_prob,
+        obs_vec, obs_xy, labels[:n_first], sides[:n_first], theta[:n_first], tol_t[:n_first], bounds, _FIRST_CHUNK,
+        n_chunks, tol, n_others, mounts, cams, dist, rows, row_off, state, limit, confirm_patterns, max_false_prob,
         strong_false_prob, checks_per_chunk, max_candidates, marg_r, marg_prob, marg_off, marg_obs, marg_cat,
         marg_trials, radius_px, pixel_scale, cells, key, bucket_start, tab_x, tab_y, ids, n_buckets, b_scale,
         screen_chord, s_cell, s_side, s_keys, s_starts, s_stars, s_columns, mask_n, mask_words, star_vec, g_cell,
@@ -270,8 +276,8 @@ def _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, l
         # (maxangle_search.search: the extension's triangles, at most EXTENSION_TRIALS more hypotheses)
         limit_ext = state[0] + EXTENSION_TRIALS if limit < 0 else min(limit, state[0] + EXTENSION_TRIALS)
         found, m_obs, m_cat, r, prob, _ = search_chunks(
-            obs_vec, obs_xy, labels[n_first:], sides[n_first:], theta[n_first:], tol_t[n_first:], bounds_ext, 0,
-            len(bounds_ext) - 1, tol, n_others, mounts, cams, dist, rows, row_off, state, limit_ext,
+            obs_vec, obs_xy, labels[n_first:], sides[n_first:], theta[n_first:], tol_t[n_first:], bounds_ext,
+            _FIRST_CHUNK, len(bounds_ext) - 1, tol, n_others, mounts, cams, dist, rows, row_off, state, limit_ext,
             confirm_patterns, max_false_prob, strong_false_prob, checks_per_chunk, max_candidates, marg_r, marg_prob,
             marg_off, marg_obs, marg_cat, marg_trials, radius_px, pixel_scale, cells, key, bucket_start, tab_x,
             tab_y, ids, n_buckets, b_scale, screen_chord, s_cell, s_side, s_keys, s_starts, s_stars, s_columns,

@@ -96,10 +96,20 @@ def _screen(obs_vec: np.ndarray, obs_tris: np.ndarray, cands: np.ndarray, others
     hits = np.zeros(k_total, dtype=np.int64)
     fo = np.empty((3, 3))
     fc = np.empty((3, 3))
+    local = np.empty((len(others), 3))  # O^T v of each of ``others``, for the observed triangle at hand
+    p0, p1, p2 = -1, -1, -1
+    h_obs = 0.0
     for k in range(k_total):
         o0, o1, o2 = obs_tris[k, 0], obs_tris[k, 1], obs_tris[k, 2]
         c0, c1, c2 = cands[k, 0], cands[k, 1], cands[k, 2]
-        h_obs = _frame(obs_vec[o0], obs_vec[o1], obs_vec[o2], fo)
+        if o0 != p0 or o1 != p1 or o2 != p2:  # a chunk's candidates come triangle by triangle
+            h_obs = _frame(obs_vec[o0], obs_vec[o1], obs_vec[o2], fo)
+            for m in range(len(others)):
+                v = obs_vec[others[m]]
+                local[m, 0] = fo[0, 0] * v[0] + fo[1, 0] * v[1] + fo[2, 0] * v[2]
+                local[m, 1] = fo[0, 1] * v[0] + fo[1, 1] * v[1] + fo[2, 1] * v[2]
+                local[m, 2] = fo[0, 2] * v[0] + fo[1, 2] * v[1] + fo[2, 2] * v[2]
+            p0, p1, p2 = o0, o1, o2
         h_cat = _frame(star_vec[c0], star_vec[c1], star_vec[c2], fc)
         if (h_obs > 0) != (h_cat > 0):
             hits[k] = -1
@@ -110,10 +120,7 @@ def _screen(obs_vec: np.ndarray, obs_tris: np.ndarray, cands: np.ndarray, others
             row = others[m]
             if row == o0 or row == o1 or row == o2:
                 continue
-            v = obs_vec[row]
-            l0 = fo[0, 0] * v[0] + fo[1, 0] * v[1] + fo[2, 0] * v[2]
-            l1 = fo[0, 1] * v[0] + fo[1, 1] * v[1] + fo[2, 1] * v[2]
-            l2 = fo[0, 2] * v[0] + fo[1, 2] * v[1] + fo[2, 2] * v[2]
+            l0, l1, l2 = local[m, 0], local[m, 1], local[m, 2]
             px = fc[0, 0] * l0 + fc[0, 1] * l1 + fc[0, 2] * l2
             py = fc[1, 0] * l0 + fc[1, 1] * l1 + fc[1, 2] * l2
             pz = fc[2, 0] * l0 + fc[2, 1] * l1 + fc[2, 2] * l2

@@ -139,6 +139,11 @@ def _member(rows: np.ndarray, of: np.ndarray) -> np.ndarray:
     return out
 
 
+_MIN_PAIRS = np.int64(MIN_PAIRS)
+"""``photometry.MIN_PAIRS`` as an int64, as the Python path passes it (a module's int in a compiled
+call is typed ``Literal[int]``: ``too_bright_kernel`` compiled a second time)."""
+
+
 @njit(cache=True, nogil=True)
 def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, cell, n_side, keys, starts, stars,
                   columns, chord, mount, cam, dist, radius_px, sigma_px, hidden_sep, hidden_limits):
@@ -173,7 +178,7 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
     bad = distant_kernel(d, pair_mag, sigma_px)
     bad |= hidden_kernel(m_cat, d, pair_mag, hidden_sep, hidden_limits, 1.0 / cam[0], CROWD * radius_px)  # left out
     if has_flux:
-        bad |= too_bright_kernel(flux[m_obs], pair_mag, THRESHOLD_MAG, MIN_PAIRS)
+        bad |= too_bright_kernel(flux[m_obs], pair_mag, THRESHOLD_MAG, _MIN_PAIRS)
         bad |= faintest_inverted_kernel(flux[m_obs], pair_mag)
     if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
         field = np.unique(rows)

@@ -143,6 +143,11 @@ for :func:`recheck_pairs` to pair more stars (the near-miss test's widest radius
 for the refit's move)."""
 
 
+_NO_ROW = np.int64(-1)
+"""No catalogue row to skip, as an int64 (a literal ``-1`` in a compiled call is typed
+``Literal[int]``: ``has_star_within`` compiled a second time)."""
+
+
 @njit(cache=True, nogil=True)
 def could_pair_more(obs_vec, paired, r, chord, cell, n_side, keys, starts, stars, star_vec, columns):
     """True if some observed star not in ``paired`` lies within ``chord`` (unit-vector
@@ -162,7 +167,8 @@ def could_pair_more(obs_vec, paired, r, chord, cell, n_side, keys, starts, stars
         px = r[0, 0] * v[0] + r[1, 0] * v[1] + r[2, 0] * v[2]
         py = r[0, 1] * v[0] + r[1, 1] * v[1] + r[2, 1] * v[2]
         pz = r[0, 2] * v[0] + r[1, 2] * v[1] + r[2, 2] * v[2]
-        if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, -1, -1, -1):
+        if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, _NO_ROW, _NO_ROW,
+                           _NO_ROW):
             return True
     return False
 

@@ -74,6 +74,12 @@ def calls(bounds: np.ndarray) -> list[tuple[int, int]]:
     return out
 
 
+_TRIANGLE = np.int64(3)
+_MIN_MATCHES = np.int64(4)
+"""``needed_hits``' and ``could_pass_bound``'s counts as int64, as the Python path passes them (a
+literal ``3`` or ``4`` in a compiled call is typed ``Literal[int]``: a second compile of each)."""
+
+
 @njit(cache=True, nogil=True)
 def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, eps, n_others, mounts, cams, dist,
                   rows, row_off, state, trial_limit, confirm_patterns, max_false_prob, strong_false_prob, max_checks,
@@ -126,7 +132,8 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
                        star_vec, s_columns, mask_n, mask_words)
         order = np.argsort(-hits, kind="mergesort")
         least = 1 if len(obs_vec) > 3 else 0
-        need = needed_hits(len(obs_vec), 3, n_others, radius_px, cams[0, 3] * cams[0, 4], trials + 1, max_false_prob, 4)
+        need = needed_hits(len(obs_vec), _TRIANGLE, n_others, radius_px, cams[0, 3] * cams[0, 4], trials + 1,
+                           max_false_prob, _MIN_MATCHES)
         for oi in range(min(k, max_checks)):
             row = order[oi]
             if hits[row] < least:
@@ -145,7 +152,8 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
                                                s_side, s_keys, s_starts, s_stars, star_vec, s_columns) < need:
                 continue  # too few stars even in the wide screen to pass the bound (NEED_SCREEN_FACTOR)
             if not could_pass_bound(obs_vec, o, r, n_others, wide_chord, radius_px, cams[0, 3] * cams[0, 4], trials,
-                                    max_false_prob, 4, c[0], c[1], c[2], s_cell, s_side, s_keys, s_starts, s_stars,
+                                    max_false_prob, _MIN_MATCHES, c[0], c[1], c[2], s_cell, s_side, s_keys, s_starts,
+                                    s_stars,
                                     star_vec, s_columns):
                 continue  # a big frame: too few of all its stars in the wide screen (screen.could_pass_bound)
             near_state[0] = 0.0  # a fresh gathering, as each Verifier.check's own call does

@@ -255,7 +255,7 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
     marg_off = np.zeros(MAX_MARGINAL + 1, np.int64)
     marg_obs = np.zeros(MAX_MARGINAL * n_obs, np.int64)
     marg_cat = np.zeros(MAX_MARGINAL * n_obs, np.int64)
-    n_marg = 0
+    n_marg = np.int64(0)  # (an int64 from the start: a literal 0 gave its callees a second signature)
     exhausted = True
     empty = np.zeros(0, np.int64)
     deferred = 0
@@ -386,6 +386,12 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
             marg_cat[:marg_off[n_marg]], marg_trials[:n_marg], probes, cands)
 
 
+_PATTERN = np.int64(4)
+"""A pattern's stars (and the fewest pairs a check may name) as an int64, as the Python path
+passes ``needed_hits`` its counts (a literal ``4`` would be typed ``Literal[int]``: a second
+compile)."""
+
+
 @njit(cache=True, nogil=True)
 def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s_side, s_keys, s_starts,
             s_stars, s_columns, g_cell, g_side, g_keys, g_starts, g_stars, g_columns, near_chord, mount, buf,
@@ -399,7 +405,8 @@ def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s
         # the screen: some other bright star must land on a catalogue star, and as many as a
         # check would need to pass the bound (needed_hits) unless the wide screen finds them
         # (the verifier's NEED_SCREEN_FACTOR)
-        need = max(1, needed_hits(n_obs, 4, n_screen, radius_px, cams[0, 3] * cams[0, 4], trials, max_false_prob, 4))
+        need = max(1, needed_hits(n_obs, _PATTERN, n_screen, radius_px, cams[0, 3] * cams[0, 4], trials,
+                                  max_false_prob, _PATTERN))
         hits = hits_under(obs_vec, o, r, n_screen, screen_chord, need, lab[0], lab[1], lab[2], s_cell, s_side,
                           s_keys, s_starts, s_stars, star_vec, s_columns)
         if hits == 0:

@@ -37,7 +37,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from ._entry import EntryCall, plain
+from ._entry import EntryCall, plain, sole_entry
 from .answer import FIELD_MARGIN_DEG, answer_kernel, star_mags
 from .attitude import PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
 from .camera import brightest_first
@@ -175,7 +175,7 @@ def kernel_entry() -> Any:
     if len(frame_first_pass_kernel.overloads) != 1:
         return None
     if _ENTRY[0] is None:  # (the one signature compiled or loaded is the first: overloads only grow)
-        _ENTRY[0] = next(iter(frame_first_pass_kernel.overloads.values())).entry_point
+        _ENTRY[0] = sole_entry(frame_first_pass_kernel)
     return _ENTRY[0]
 
 

@@ -278,6 +278,11 @@ def least_extras(n_free: int, pair_p: float, trials: int, max_false_prob: float,
     return n_free + 1
 
 
+MIN_MATCHES = np.int64(4)
+"""The verifier's ``min_matches`` (``Verifier.min_matches``) as the compiled searches pass it to
+:func:`needed_hits` and ``screen.could_pass_bound``: an int64, as the Python path passes it (a
+literal ``4`` in a compiled call is typed ``Literal[int]``, and the callee compiled again)."""
+
 NEED_MAX_UNSCREENED = 2
 """:func:`needed_hits` asks its hits only of frames with at most this many stars beyond those the
 screen looks at: on a bigger frame the stars it skips could supply the extra pairs, and the

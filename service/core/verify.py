@@ -269,15 +269,9 @@ class Verifier:
         """Screen hits of one candidate at its check's starting attitude (Wahba's on its three
         stars) and ``NEED_SCREEN_FACTOR`` times the screen's chord, counted up to ``enough``
         (:func:`~service.core.screen.hits_under`, as ``maxangle``'s compiled search calls it)."""
-        stars = star_vec64(self.db)
-        o = np.asarray(obs_tri, dtype=np.int64)
-        c = np.asarray(cand, dtype=np.int64)
-        r = wahba_kernel(np.ascontiguousarray(self.obs.vec[o], dtype=np.float64), stars[c], np.ones(len(o)))
-        g = sky_grid(self.db)
-        chord = NEED_SCREEN_FACTOR * 1.5 * self.match_radius_px * self.obs.pixel_scale_rad
-        return int(hits_under(np.ascontiguousarray(self.obs.vec, dtype=np.float64), o, r, len(others), chord, enough,
-                              int(c[0]), int(c[1]), int(c[2]), g.cell, g.n_side, g.keys, g.starts, g.stars, stars,
-                              g.columns))
+        vec, o, c, r, chord, g, stars = self._wide_start(obs_tri, cand)
+        return int(hits_under(vec, o, r, len(others), chord, enough, int(c[0]), int(c[1]), int(c[2]), g.cell,
+                              g.n_side, g.keys, g.starts, g.stars, stars, g.columns))
 
     def _could_pass(self, obs_tri: IntArray, cand: IntArray, n_screened: int) -> bool:
         """:func:`~service.core.screen.could_pass_bound` of one candidate, as ``maxangle``'s
@@ -286,18 +280,23 @@ class Verifier:
         check after this one would need (a frame of one camera; True for a rig's)."""
         if len(self.obs) <= n_screened + NEED_MAX_UNSCREENED or len(self.obs.cameras) != 1:
             return True
+        vec, o, c, r, chord, g, stars = self._wide_start(obs_tri, cand)
+        cam = self.obs.cameras[0]
+        return bool(could_pass_bound(vec, o, r, n_screened, chord, float(self.match_radius_px),
+                                     float(cam.width) * float(cam.height), self.trials + 1, float(self.max_false_prob),
+                                     int(self.min_matches), int(c[0]), int(c[1]), int(c[2]), g.cell, g.n_side, g.keys,
+                                     g.starts, g.stars, stars, g.columns))
+
+    def _wide_start(self, obs_tri: IntArray, cand: IntArray) -> tuple[object, ...]:
+        """What the wide screens of one candidate start from: the observed vectors, its rows
+        (observed, catalogue), Wahba's attitude on its three stars (ICRS -> body), the wide
+        chord (``NEED_SCREEN_FACTOR`` times the screen's), the sky grid and the star vectors."""
         stars = star_vec64(self.db)
         o = np.asarray(obs_tri, dtype=np.int64)
         c = np.asarray(cand, dtype=np.int64)
         r = wahba_kernel(np.ascontiguousarray(self.obs.vec[o], dtype=np.float64), stars[c], np.ones(len(o)))
-        g = sky_grid(self.db)
-        cam = self.obs.cameras[0]
         chord = NEED_SCREEN_FACTOR * 1.5 * self.match_radius_px * self.obs.pixel_scale_rad
-        return bool(could_pass_bound(np.ascontiguousarray(self.obs.vec, dtype=np.float64), o, r, n_screened, chord,
-                                     float(self.match_radius_px), float(cam.width) * float(cam.height),
-                                     self.trials + 1, float(self.max_false_prob), int(self.min_matches), int(c[0]),
-                                     int(c[1]), int(c[2]), g.cell, g.n_side, g.keys, g.starts, g.stars, stars,
-                                     g.columns))
+        return np.ascontiguousarray(self.obs.vec, dtype=np.float64), o, c, r, chord, sky_grid(self.db), stars
 
     def _screen(self, obs_tris: IntArray, cands: IntArray, others: IntArray) -> IntArray:
         """Hits per candidate: ``others`` (observed rows not in its triangle) that land near a

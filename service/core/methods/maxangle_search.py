@@ -31,7 +31,7 @@ from numba import njit
 
 from ..attitude import wahba_kernel
 from ..check_kernel import keep_marginal, names_marginal, verify_pairs
-from ..match import needed_hits
+from ..match import MIN_MATCHES, needed_hits
 from ..screen import _screen, could_pass_bound, hits_under
 from ..star_index import field_grid, sky_grid, sky_mask, star_vec64
 from ..verify import CHECKS_PER_CHUNK, NEAR_MARGIN_DEG, NEED_SCREEN_FACTOR, Verified
@@ -75,9 +75,7 @@ def calls(bounds: np.ndarray) -> list[tuple[int, int]]:
 
 
 _TRIANGLE = np.int64(3)
-_MIN_MATCHES = np.int64(4)
-"""``needed_hits``' and ``could_pass_bound``'s counts as int64, as the Python path passes them (a
-literal ``3`` or ``4`` in a compiled call is typed ``Literal[int]``: a second compile of each)."""
+"""A hypothesis's stars as ``needed_hits`` takes them: an int64 (see ``match.MIN_MATCHES``)."""
 
 
 @njit(cache=True, nogil=True)
@@ -133,7 +131,7 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
         order = np.argsort(-hits, kind="mergesort")
         least = 1 if len(obs_vec) > 3 else 0
         need = needed_hits(len(obs_vec), _TRIANGLE, n_others, radius_px, cams[0, 3] * cams[0, 4], trials + 1,
-                           max_false_prob, _MIN_MATCHES)
+                           max_false_prob, MIN_MATCHES)
         for oi in range(min(k, max_checks)):
             row = order[oi]
             if hits[row] < least:
@@ -152,9 +150,8 @@ def search_chunks(obs_vec, obs_xy, labels, sides, theta, tol, bounds, c0, c1, ep
                                                s_side, s_keys, s_starts, s_stars, star_vec, s_columns) < need:
                 continue  # too few stars even in the wide screen to pass the bound (NEED_SCREEN_FACTOR)
             if not could_pass_bound(obs_vec, o, r, n_others, wide_chord, radius_px, cams[0, 3] * cams[0, 4], trials,
-                                    max_false_prob, _MIN_MATCHES, c[0], c[1], c[2], s_cell, s_side, s_keys, s_starts,
-                                    s_stars,
-                                    star_vec, s_columns):
+                                    max_false_prob, MIN_MATCHES, c[0], c[1], c[2], s_cell, s_side, s_keys, s_starts,
+                                    s_stars, star_vec, s_columns):
                 continue  # a big frame: too few of all its stars in the wide screen (screen.could_pass_bound)
             near_state[0] = 0.0  # a fresh gathering, as each Verifier.check's own call does
             ok, m_obs, m_cat, r, prob = verify_pairs(obs_vec, obs_xy, star_vec, o.copy(), c.copy(), r, g_cell,

@@ -41,7 +41,7 @@ from numba import njit
 
 from ..attitude import wahba_kernel
 from ..check_kernel import RECHECK_REACH, could_pair_more, keep_marginal, names_marginal, verify_pairs
-from ..match import needed_hits
+from ..match import MIN_MATCHES, needed_hits
 from ..prefetch import prefetch
 from ..screen import hits_under
 from ..verify import NEED_SCREEN_FACTOR
@@ -387,9 +387,7 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
 
 
 _PATTERN = np.int64(4)
-"""A pattern's stars (and the fewest pairs a check may name) as an int64, as the Python path
-passes ``needed_hits`` its counts (a literal ``4`` would be typed ``Literal[int]``: a second
-compile)."""
+"""A pattern's stars as ``needed_hits`` takes them: an int64 (see ``match.MIN_MATCHES``)."""
 
 
 @njit(cache=True, nogil=True)
@@ -406,7 +404,7 @@ def _verify(obs_vec, obs_xy, star_vec, o, lab, n_screen, screen_chord, s_cell, s
         # check would need to pass the bound (needed_hits) unless the wide screen finds them
         # (the verifier's NEED_SCREEN_FACTOR)
         need = max(1, needed_hits(n_obs, _PATTERN, n_screen, radius_px, cams[0, 3] * cams[0, 4], trials,
-                                  max_false_prob, _PATTERN))
+                                  max_false_prob, MIN_MATCHES))
         hits = hits_under(obs_vec, o, r, n_screen, screen_chord, need, lab[0], lab[1], lab[2], s_cell, s_side,
                           s_keys, s_starts, s_stars, star_vec, s_columns)
         if hits == 0:

@@ -42,9 +42,10 @@ def paulson_z(f: float, d1: float, d2: float) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _spd_inverse(m: np.ndarray) -> tuple[bool, np.ndarray]:
-    """Inverse of a symmetric positive-definite matrix by Cholesky; ``(False, m)`` when a pivot
-    falls below 1e-12 of the largest diagonal element (a degenerate design)."""
+def _cholesky(m: np.ndarray) -> tuple[bool, np.ndarray]:
+    """``(ok, L)``: the lower Cholesky factor of symmetric ``m`` (its lower triangle is read);
+    ``ok`` False when a pivot falls below 1e-12 of the largest diagonal element (a degenerate
+    design)."""
     k = m.shape[0]
     top = 0.0
     for i in range(k):
@@ -55,13 +56,24 @@ def _spd_inverse(m: np.ndarray) -> tuple[bool, np.ndarray]:
         for p in range(j):
             s -= low[j, p] * low[j, p]
         if not s > 1e-12 * top:
-            return False, m
+            return False, low
         low[j, j] = math.sqrt(s)
         for i in range(j + 1, k):
             t = m[i, j]
             for p in range(j):
                 t -= low[i, p] * low[j, p]
             low[i, j] = t / low[j, j]
+    return True, low
+
+
+@njit(cache=True, nogil=True)
+def _spd_inverse(m: np.ndarray) -> tuple[bool, np.ndarray]:
+    """Inverse of a symmetric positive-definite matrix by Cholesky; ``(False, m)`` when a pivot
+    falls below 1e-12 of the largest diagonal element (a degenerate design)."""
+    k = m.shape[0]
+    ok, low = _cholesky(m)
+    if not ok:
+        return False, m
     inv_low = np.zeros((k, k))  # L^-1 by forward substitution
     for c in range(k):
         inv_low[c, c] = 1.0 / low[c, c]
@@ -100,6 +112,23 @@ def _design(a: np.ndarray, m: np.ndarray, rho: float, k: int) -> None:
 
 
 @njit(cache=True, nogil=True)
+def _predicted(ref: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float]:
+    """The catalogue directions ``r @ ref`` in the camera frame ``(n, 3)`` and the largest
+    tangent-plane radius among them (the field terms' normalisation); radius 0 when a star lies
+    behind the camera (``z <= 1e-6``), as the fits refuse then."""
+    n = len(ref)
+    m = np.empty((n, 3))
+    rho = 0.0
+    for i in range(n):
+        for a in range(3):
+            m[i, a] = r[a, 0] * ref[i, 0] + r[a, 1] * ref[i, 1] + r[a, 2] * ref[i, 2]
+        if not m[i, 2] > 1e-6:
+            return m, 0.0
+        rho = max(rho, math.hypot(m[i, 0] / m[i, 2], m[i, 1] / m[i, 2]))
+    return m, rho
+
+
+@njit(cache=True, nogil=True)
 def field_fit(obs: np.ndarray, ref: np.ndarray, r: np.ndarray
               ) -> tuple[bool, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]:
     """Rigid and joint (rotation + field) least squares of the residuals of ``obs``
@@ -117,14 +146,7 @@ def field_fit(obs: np.ndarray, ref: np.ndarray, r: np.ndarray
     none = (False, 0, np.zeros(3), np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)), 0.0, 0.0)
     if k == 0:
         return none
-    m = np.empty((n, 3))
-    rho = 0.0
-    for i in range(n):
-        for a in range(3):
-            m[i, a] = r[a, 0] * ref[i, 0] + r[a, 1] * ref[i, 1] + r[a, 2] * ref[i, 2]
-        if not m[i, 2] > 1e-6:
-            return none
-        rho = max(rho, math.hypot(m[i, 0] / m[i, 2], m[i, 1] / m[i, 2]))
+    m, rho = _predicted(ref, r)
     if not rho > 0.0:
         return none
     size = 3 + k
@@ -159,17 +181,152 @@ def field_inflation(obs: np.ndarray, ref: np.ndarray, r: np.ndarray, sigma_rad: 
     the scatter the field leaves), never less than before:
     ``gain^2 = max(1, (C_rigid s^2 + b^2) / (C_rigid sigma^2))``. Ones when the field is not
     significant (``FIELD_Z``), or the frame has too few stars to tell.
+
+    The same figures as :func:`field_fit` gives (its tests compare them), from one Cholesky
+    factor ``L`` of the joint normal matrix: the rigid fit's is its leading 3 x 3 block, the
+    sums of squares are ``ss - |L^-1 rhs|^2`` over all or the first three entries, and the
+    covariances' diagonals are asked only of a significant field. No BLAS call and no full
+    inverse: ~1-2.5 us for 10-19 stars, against 4.6-9.3 for :func:`field_fit` (every answer
+    takes this).
     """
     gain = np.ones(3)
-    ok, k, theta_r, theta_j, cov_r, cov_j, ss_rigid, ss_joint = field_fit(obs, ref, r)
-    dof = 2 * len(obs) - 3 - k
-    if not (ok and ss_joint > 0.0 and sigma_rad > 0.0):
+    n = len(obs)
+    k = TERMS_MANY if n >= MIN_STARS_MANY else (TERMS_FEW if n >= MIN_STARS_FEW else 0)
+    if k == 0 or not sigma_rad > 0.0:
         return gain
+    size = 3 + k
+    ok, low, y, ss = _field_normal_factor(obs, ref, r, k)
+    if not ok:
+        return gain
+    ss_r = 0.0
+    for a in range(3):
+        ss_r += y[a] * y[a]
+    ss_f = 0.0
+    for a in range(3, size):
+        ss_f += y[a] * y[a]
+    ss_rigid = ss - ss_r
+    ss_joint = ss_rigid - ss_f
+    if not ss_joint > 0.0:
+        return gain
+    dof = 2 * n - 3 - k
     s2 = ss_joint / dof
-    f = ((ss_rigid - ss_joint) / k) / s2
+    f = (ss_f / k) / s2
     if paulson_z(f, float(k), float(dof)) > FIELD_Z:
+        theta_j = _back_solve(low, y, size)
+        theta_r = _back_solve(low, y, 3)
+        diag_j = _inverse_diagonal(low, size)
+        diag_r = _inverse_diagonal(low, 3)
         for a in range(3):
             delta = theta_j[a] - theta_r[a]
-            bias2 = max(delta * delta - (cov_j[a, a] - cov_r[a, a]) * s2, 0.0)
-            gain[a] = math.sqrt(max((cov_r[a, a] * s2 + bias2) / (cov_r[a, a] * sigma_rad * sigma_rad), 1.0))
+            bias2 = max(delta * delta - (diag_j[a] - diag_r[a]) * s2, 0.0)
+            gain[a] = math.sqrt(max((diag_r[a] * s2 + bias2) / (diag_r[a] * sigma_rad * sigma_rad), 1.0))
     return gain
+
+
+@njit(cache=True, nogil=True)
+def _field_normal_factor(obs: np.ndarray, ref: np.ndarray, r: np.ndarray, k: int
+                         ) -> tuple[bool, np.ndarray, np.ndarray, float]:
+    """``(ok, L, y, ss)`` of :func:`field_fit`'s joint design with ``k`` field terms: ``L`` the
+    Cholesky factor of its normal matrix (lower, ``(3 + k, 3 + k)``), ``y = L^-1 rhs`` and the
+    residuals' sum of squares (rad^2); ``ok`` False as :func:`field_fit` refuses (a star behind
+    the camera, a degenerate design: a pivot below 1e-12 of the largest diagonal element). The
+    normal matrix is dot products of the design's columns (:func:`_gram`)."""
+    n = len(obs)
+    size = 3 + k
+    normal = np.zeros((size, size))
+    rhs = np.zeros(size)
+    none = (False, normal, rhs, 0.0)
+    m, rho = _predicted(ref, r)
+    if not rho > 0.0:
+        return none
+    design = np.empty((size, 3 * n))  # column by column: the normal matrix is dot products
+    resid = np.empty(3 * n)
+    gx = np.zeros(TERMS_MANY)
+    gy = np.zeros(TERMS_MANY)
+    ss = 0.0
+    for i in range(n):
+        m0, m1, m2 = m[i, 0], m[i, 1], m[i, 2]
+        _field_terms(m0 / m2 / rho, m1 / m2 / rho, k, gx, gy)
+        j = 3 * i
+        design[0, j], design[0, j + 1], design[0, j + 2] = 0.0, -m2, m1
+        design[1, j], design[1, j + 1], design[1, j + 2] = m2, 0.0, -m0
+        design[2, j], design[2, j + 1], design[2, j + 2] = -m1, m0, 0.0
+        for t in range(k):
+            along = gx[t] * m0 + gy[t] * m1
+            design[3 + t, j] = gx[t] - along * m0
+            design[3 + t, j + 1] = gy[t] - along * m1
+            design[3 + t, j + 2] = -along * m2
+        for c in range(3):
+            resid[j + c] = obs[i, c] - m[i, c]
+            ss += resid[j + c] * resid[j + c]
+    _gram(design, resid, normal, rhs)
+    ok, low = _cholesky(normal)
+    if not ok:
+        return none
+    y = np.empty(size)
+    for i in range(size):
+        t = rhs[i]
+        for p in range(i):
+            t -= low[i, p] * y[p]
+        y[i] = t / low[i, i]
+    return True, low, y, ss
+
+
+@njit(cache=True, nogil=True)
+def _field_terms(x: float, y: float, k: int, gx: np.ndarray, gy: np.ndarray) -> None:
+    """The first ``k`` field terms' x and y displacements at normalised field position ``(x,
+    y)`` into ``gx``, ``gy`` (:func:`_design`'s: scale, two shears, six quadratic)."""
+    gx[0], gx[1], gx[2] = x, x, y
+    gy[0], gy[1], gy[2] = y, -y, x
+    if k > 3:
+        gx[3], gx[4], gx[5], gx[6], gx[7], gx[8] = x * x, x * y, y * y, 0.0, 0.0, 0.0
+        gy[3], gy[4], gy[5], gy[6], gy[7], gy[8] = 0.0, 0.0, 0.0, x * x, x * y, y * y
+
+
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def _gram(design: np.ndarray, resid: np.ndarray, normal: np.ndarray, rhs: np.ndarray) -> None:
+    """``normal = design design^T`` (each pair once) and ``rhs = design resid`` (``design``
+    one column of the least squares a row). Sums may be reordered (SIMD, ~2x faster; the
+    result moves by ~1e-16 relative); no NaN or sign assumptions."""
+    size, length = design.shape
+    for p in range(size):
+        t = 0.0
+        for j in range(length):
+            t += design[p, j] * resid[j]
+        rhs[p] = t
+        for q in range(p, size):
+            t = 0.0
+            for j in range(length):
+                t += design[p, j] * design[q, j]
+            normal[p, q] = normal[q, p] = t
+
+
+@njit(cache=True, nogil=True)
+def _back_solve(low: np.ndarray, y: np.ndarray, size: int) -> np.ndarray:
+    """``x`` solving ``L[:size, :size]^T x = y[:size]``."""
+    x = np.empty(size)
+    for i in range(size - 1, -1, -1):
+        t = y[i]
+        for p in range(i + 1, size):
+            t -= low[p, i] * x[p]
+        x[i] = t / low[i, i]
+    return x
+
+
+@njit(cache=True, nogil=True)
+def _inverse_diagonal(low: np.ndarray, size: int) -> np.ndarray:
+    """The first three diagonal elements of ``(L L^T)^-1`` for ``L = low[:size, :size]``: the
+    squared norms of the first three columns of ``L^-1``."""
+    out = np.zeros(3)
+    col = np.empty(size)
+    for c in range(3):
+        for i in range(size):
+            if i < c:
+                col[i] = 0.0
+                continue
+            t = 1.0 if i == c else 0.0
+            for p in range(c, i):
+                t -= low[i, p] * col[p]
+            col[i] = t / low[i, i]
+            out[c] += col[i] * col[i]
+    return out

@@ -11,7 +11,7 @@ from scipy import stats
 
 from service.core.attitude import ARCSEC_PER_RAD, estimate, quat_to_matrix
 from service.core.geometry import radec_to_vector
-from service.core.residual_field import field_inflation, paulson_z
+from service.core.residual_field import FIELD_Z, field_fit, field_inflation, paulson_z
 
 SIGMA = 10.0 / ARCSEC_PER_RAD
 """Per-axis star error: 0.2 px of a 15-deg, 1024-px camera (~53"/px), radians."""
@@ -118,3 +118,34 @@ def test_compiled_and_general_paths_widen_alike(monkeypatch, default_set_db) -> 
         gain = field_inflation(obs, ref, quat_to_matrix(np.asarray(general.quaternion)), 1.0 / rf.camera.f_px)
         widened += bool(np.any(gain > 1.0))
     assert widened >= 3
+
+
+def _inflation_from_field_fit(obs: np.ndarray, ref: np.ndarray, r: np.ndarray, sigma_rad: float) -> np.ndarray:
+    """``field_inflation``'s figure from :func:`field_fit`'s full inverses (the definition)."""
+    gain = np.ones(3)
+    ok, k, theta_r, theta_j, cov_r, cov_j, ss_rigid, ss_joint = field_fit(obs, ref, r)
+    if not (ok and ss_joint > 0.0 and sigma_rad > 0.0):
+        return gain
+    dof = 2 * len(obs) - 3 - k
+    s2 = ss_joint / dof
+    if paulson_z(((ss_rigid - ss_joint) / k) / s2, float(k), float(dof)) > FIELD_Z:
+        for a in range(3):
+            bias2 = max((theta_j[a] - theta_r[a]) ** 2 - (cov_j[a, a] - cov_r[a, a]) * s2, 0.0)
+            gain[a] = math.sqrt(max((cov_r[a, a] * s2 + bias2) / (cov_r[a, a] * sigma_rad**2), 1.0))
+    return gain
+
+
+def test_the_one_factor_inflation_is_field_fits() -> None:
+    """``field_inflation`` (one Cholesky factor, no inverse) gives what ``field_fit``'s full
+    inverses give, on fields both widened and not, at 3 and 9 field terms and too few stars."""
+    rng = np.random.default_rng(12)
+    widened = 0
+    for trial in range(400):
+        n = int(rng.integers(4, 45))
+        p = (0.0, 0.0) if trial % 2 else tuple(rng.uniform(-3e-3, 3e-3, 2))
+        obs, ref = _frame(rng, n, p)
+        r = estimate(obs, ref).matrix
+        got = field_inflation(obs, ref, r, SIGMA)
+        np.testing.assert_allclose(got, _inflation_from_field_fit(obs, ref, r, SIGMA), rtol=1e-9)
+        widened += bool(np.any(got > 1.0))
+    assert 50 < widened < 300  # both branches are compared

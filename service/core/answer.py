@@ -24,6 +24,7 @@ from .camera import project_rows
 from .check_kernel import recheck_pairs
 from .hidden import hidden_kernel, hidden_neighbours
 from .match import CROWD
+from .medians import median
 from .navdb.reader import NavDatabase
 from .photometry import (
     FAINT_GATE_MAG,
@@ -180,7 +181,7 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
     if has_flux:
         bad |= too_bright_kernel(flux[m_obs], pair_mag, THRESHOLD_MAG, _MIN_PAIRS)
         bad |= faintest_inverted_kernel(flux[m_obs], pair_mag)
-    if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
+    if len(pair_mag) >= 3 and pair_mag.max() > median(pair_mag) + FAINT_GATE_MAG:
         field = np.unique(rows)
         bad |= completeness_kernel(pair_mag, star_mag[field], _member(field, m_cat))
     if bad.any():

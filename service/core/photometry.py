@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .medians import median
 from .types import FloatArray
 
 THRESHOLD_MAG = 2.0
@@ -44,8 +45,8 @@ def _theil_sen(xs: np.ndarray, ys: np.ndarray) -> tuple[float, float]:
                 n_s += 1
     if n_s == 0:
         return np.nan, np.nan
-    slope = np.median(slopes[:n_s])
-    return slope, np.median(ys) - slope * np.median(xs)
+    slope = median(slopes[:n_s])
+    return slope, median(ys) - slope * median(xs)
 
 
 def too_bright(flux: FloatArray, cat_mag: FloatArray, *, threshold_mag: float = THRESHOLD_MAG,
@@ -80,7 +81,7 @@ def too_bright_kernel(flux: np.ndarray, mag: np.ndarray, threshold_mag: float, m
     if not np.isfinite(slope) or slope <= 0:
         return out  # no usable brightness information (e.g. fluxes that are only a rank)
     resid = inst - (intercept + slope * m)  # negative: brighter than predicted
-    sigma = 1.4826 * np.median(np.abs(resid - np.median(resid)))
+    sigma = 1.4826 * median(np.abs(resid - median(resid)))
     limit = -max(threshold_mag, 4.0 * sigma)
     for i in range(n_ok):
         out[ok[i]] = resid[i] < limit
@@ -119,7 +120,7 @@ def completeness_kernel(pair_mag: np.ndarray, field_mag: np.ndarray, field_paire
         return out
     missed_mag = np.sort(field_mag[~field_paired])
     paired_mag = np.sort(field_mag[field_paired])
-    gate = np.median(pair_mag) + FAINT_GATE_MAG
+    gate = median(pair_mag) + FAINT_GATE_MAG
     for j in range(len(pair_mag)):
         if pair_mag[j] <= gate:
             continue

@@ -28,6 +28,7 @@ import math
 import numpy as np
 from numba import njit
 
+from .medians import median
 from .types import FloatArray
 
 Z_ANY = 5.0
@@ -63,7 +64,7 @@ def distant_kernel(d_px: np.ndarray, pair_mag: np.ndarray, sigma_px: float) -> n
     known = d_px[np.isfinite(d_px)]
     if len(known) < MIN_PAIRS:
         return out
-    measured = math.sqrt(np.median(known * known) / math.log(4.0))
+    measured = math.sqrt(median(known * known) / math.log(4.0))
     sigma = max(measured, sigma_px)
     faintest, second = -np.inf, -np.inf
     at = -1

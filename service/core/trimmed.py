@@ -27,6 +27,7 @@ import numpy as np
 from numba import njit
 
 from .attitude import wahba_batch, wahba_svd
+from .medians import median
 from .navdb.reader import NavDatabase
 from .star_index import star_vec64
 from .verify import Verified, Verifier
@@ -88,4 +89,4 @@ def _robust_sigma_px(obs_vec: np.ndarray, star_vec: np.ndarray, obs_idx: np.ndar
             e = r[a, 0] * c[0] + r[a, 1] * c[1] + r[a, 2] * c[2] - o[a]
             s += e * e
         d2[i] = s / (pixel_scale * pixel_scale)
-    return math.sqrt(np.median(d2) / math.log(4.0))
+    return math.sqrt(median(d2) / math.log(4.0))

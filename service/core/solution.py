@@ -12,7 +12,7 @@ from numba import njit
 from .answer import star_mags
 from .attitude import boresight_into, quaternion_into
 from .navdb.reader import NavDatabase
-from .types import MatchedStars, Solution, SolveStatus
+from .types import MatchedStars, Solution, solved_solution_of
 from .verify import Observation
 
 
@@ -84,18 +84,8 @@ def solution_of(ints: np.ndarray, floats: np.ndarray, rms_arcsec: float, sigma_a
     head = floats[:7].tolist()
     stars = MatchedStars(ints[:n], ints[n:2 * n], floats[7:7 + n], floats[7 + n:7 + 2 * n],
                          floats[7 + 2 * n:7 + 3 * n], floats[7 + 3 * n:], ints[2 * n:])  # made tuples when read
-    return Solution(
-        SolveStatus.SOLVED,
-        method,
-        quaternion=(head[0], head[1], head[2], head[3]),
-        ra_deg=head[4],
-        dec_deg=head[5],
-        roll_deg=head[6],
-        stars=stars,
-        rms_arcsec=rms_arcsec,
-        false_match_probability=false_prob,
-        attitude_sigma_arcsec=sigma_arcsec,
-    )
+    return solved_solution_of(method, (head[0], head[1], head[2], head[3]), head[4], head[5], head[6], stars,
+                              rms_arcsec, false_prob, sigma_arcsec)
 
 
 __all__ = ["answer", "answer_columns", "solution_of", "star_hips"]

@@ -1,10 +1,12 @@
 """The answer's star list (service.core.types.MatchedStars): columns made tuples when read."""
 
+import dataclasses
 import pickle
 
 import numpy as np
+import pytest
 
-from service.core.types import MatchedStars, Solution, SolveStatus, StarMatch
+from service.core.types import MatchedStars, Solution, SolveStatus, StarMatch, solved_solution_of
 
 
 def _columns() -> tuple:
@@ -54,3 +56,20 @@ def test_a_column_reads_the_same_before_and_after_the_tuples_are_made() -> None:
     assert before["camera"] == [0, 0, 0]
     assert len(stars[:]) == 3  # makes the tuples
     assert {name: stars.column(name) for name in StarMatch._fields} == before
+
+
+def test_the_slot_made_solution_is_the_dataclass_s_own() -> None:
+    """``solved_solution_of`` sets every field (a field added to Solution and forgotten there
+    would be unset: comparing would raise), equal to the dataclass's ``__init__``, still frozen."""
+    stars = MatchedStars([3, 1], [11767, 424], [37.95, 2.5], [89.26, 1.0], [2.0, 4.1], [0.5, 1.5], [0, 0])
+    args = dict(quaternion=(0.5, 0.5, 0.5, 0.5), ra_deg=37.9, dec_deg=89.2, roll_deg=12.0, stars=stars,
+                rms_arcsec=1.2, false_match_probability=1e-12, attitude_sigma_arcsec=(1.0, 2.0, 3.0))
+    fast = solved_solution_of("quad", **args)
+    slow = Solution(SolveStatus.SOLVED, "quad", **args)
+    for f in dataclasses.fields(Solution):
+        assert getattr(fast, f.name) == getattr(slow, f.name), f.name
+    assert fast == slow and fast.solved
+    assert fast.timings_ms is not solved_solution_of("quad", **args).timings_ms  # a dict of its own
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fast.method = "other"  # type: ignore[misc]
+    assert fast.to_dict() == slow.to_dict()

@@ -75,7 +75,7 @@ def check_unique_triangle(
     stars = verifier.db.stars.vec
     obs_idx = np.asarray(obs_idx, dtype=np.int64)
     cat_idx = np.asarray(cat_idx, dtype=np.int64)
-    if len(obs_idx) != 3 or len(np.unique(cat_idx)) != 3:
+    if len(obs_idx) != 3 or len(set(cat_idx.tolist())) != 3:  # (np.unique: ~14 us)
         return None
     r = wahba_svd(obs.vec[obs_idx], stars[cat_idx])
     radius = verifier.match_radius_px * obs.pixel_scale_rad
@@ -99,7 +99,7 @@ def check_unique_triangle(
         return None
     box_cands, box_halfwidth_rad = got
     box = np.asarray(box_cands, dtype=np.int64).reshape(-1, 3)
-    box = box[(box[:, 0] != cat_idx[0]) | (box[:, 1] != cat_idx[1]) | (box[:, 2] != cat_idx[2])]  # without the match
+    box = _without_triple(np.ascontiguousarray(box), int(cat_idx[0]), int(cat_idx[1]), int(cat_idx[2]))
     thin = 1.0
     if len(box) > SPARSE_MAX_SAMPLE:  # a random thinning of a Poisson count is Poisson
         thin = len(box) / SPARSE_MAX_SAMPLE
@@ -127,6 +127,19 @@ def check_unique_triangle(
     if prob > verifier.max_false_prob:
         return None
     return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), prob, looks)
+
+
+@njit(cache=True, nogil=True)
+def _without_triple(box: np.ndarray, a: int, b: int, c: int) -> np.ndarray:
+    """The rows of ``box`` (K, 3) other than ``(a, b, c)``, in order: the boolean mask of three
+    column comparisons took ~55 us on a density box of ~1,900 triples, this ~3."""
+    keep = 0
+    out = np.empty_like(box)
+    for i in range(len(box)):
+        if box[i, 0] != a or box[i, 1] != b or box[i, 2] != c:
+            out[keep, 0], out[keep, 1], out[keep, 2] = box[i, 0], box[i, 1], box[i, 2]
+            keep += 1
+    return out[:keep].copy()
 
 
 def _rows_but(groups: tuple[IntArray, ...], n: int, taken: IntArray) -> IntArray:
@@ -322,6 +335,7 @@ def warm_up_screens(db: NavDatabase, camera: Camera, frame: Centroids) -> None:
         _could_explain(verifier, triples, np.arange(3))
         _star_in_view(verifier, triples, np.arange(3))
         _sparse_attitudes(obs.vec[:3], star_vec64(db), triples)
+    _without_triple(triples, 0, 1, 2)
 
 
 def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,

@@ -11,7 +11,7 @@ from service.core.attitude import quat_to_matrix
 from service.core.navdb import NavDatabase
 from service.core.pipeline import _observation
 from service.core.sim import SimConfig, simulate_frames
-from service.core.sparse_proof import _field_check
+from service.core.sparse_proof import _field_check, _without_triple
 from service.core.star_index import star_tree
 from service.core.verify import Verifier
 from tests.conftest import SEED000_CAMERA
@@ -253,3 +253,15 @@ def test_box_screens_neighbour_short_cut_keeps_the_scans_exclusions(seed000_db: 
             assert _box_kernel(*args, nb)[0] == want[0]
             counted[name] += int(want[0])
     assert counted["own"] == 0 and counted["away"] == 0 and counted["free"] > 50
+
+
+def test_the_box_without_the_match_is_the_masks() -> None:
+    """``_without_triple`` drops every row equal to the match, keeps the rest in order (as the
+    boolean mask it replaced), and returns the box whole when the match is not in it."""
+    rng = np.random.default_rng(5)
+    box = rng.integers(0, 6, (400, 3))
+    for a, b, c in [(1, 2, 3), (0, 0, 0), (9, 9, 9)]:
+        mask = (box[:, 0] != a) | (box[:, 1] != b) | (box[:, 2] != c)
+        np.testing.assert_array_equal(_without_triple(box, a, b, c), box[mask])
+    assert len(_without_triple(box, 9, 9, 9)) == len(box)
+    assert len(_without_triple(box[:0].copy(), 1, 2, 3)) == 0

@@ -75,7 +75,7 @@ def check_unique_triangle(
     stars = verifier.db.stars.vec
     obs_idx = np.asarray(obs_idx, dtype=np.int64)
     cat_idx = np.asarray(cat_idx, dtype=np.int64)
-    if len(obs_idx) != 3 or len(set(cat_idx.tolist())) != 3:  # (np.unique: ~14 us)
+    if len(obs_idx) != 3 or len(set(cat_idx.tolist())) != 3:  # (np.unique: ~3 us, a set ~0.3)
         return None
     r = wahba_svd(obs.vec[obs_idx], stars[cat_idx])
     radius = verifier.match_radius_px * obs.pixel_scale_rad
@@ -132,14 +132,14 @@ def check_unique_triangle(
 @njit(cache=True, nogil=True)
 def _without_triple(box: np.ndarray, a: int, b: int, c: int) -> np.ndarray:
     """The rows of ``box`` (K, 3) other than ``(a, b, c)``, in order: the boolean mask of three
-    column comparisons took ~55 us on a density box of ~1,900 triples, this ~3."""
+    column comparisons took ~55 us on a density box of ~1,900 triples, this ~5."""
     keep = 0
     out = np.empty_like(box)
     for i in range(len(box)):
         if box[i, 0] != a or box[i, 1] != b or box[i, 2] != c:
             out[keep, 0], out[keep, 1], out[keep, 2] = box[i, 0], box[i, 1], box[i, 2]
             keep += 1
-    return out[:keep].copy()
+    return out[:keep]
 
 
 def _rows_but(groups: tuple[IntArray, ...], n: int, taken: IntArray) -> IntArray:

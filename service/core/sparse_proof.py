@@ -335,6 +335,12 @@ def warm_up_screens(db: NavDatabase, camera: Camera, frame: Centroids) -> None:
         _could_explain(verifier, triples, np.arange(3))
         _star_in_view(verifier, triples, np.arange(3))
         _sparse_attitudes(obs.vec[:3], star_vec64(db), triples)
+        # the kernels a proof and a small frame's screen call from Python, not from a compiled
+        # caller (whose cached code holds its own copy): the pairing of a proven match
+        # (match._match_rig) and the wide screen (screen.hits_under). Loaded on first use they
+        # cost a worker's first 3-4-star frames 5-9 ms each (session 31)
+        verifier._match_all(np.eye(3))
+        verifier._wide_hits(np.arange(3), triples[0], np.arange(n), 3)
     _without_triple(triples, 0, 1, 2)
 
 

@@ -71,3 +71,49 @@ def test_map_pages_maps_every_array_file_of_the_database(default_set_db, monkeyp
     assert 0.95 * files <= mapped <= files  # every array's map (a few tiny arrays are read, not mapped)
     monkeypatch.setattr(warmup.sys, "platform", "darwin")  # no MADV_POPULATE_READ: one byte read a page
     assert warmup.map_pages(default_set_db) == mapped
+
+
+LOADS_SCRIPT = """
+import gc, json
+from numba.core.registry import CPUDispatcher
+from service.core.navdb import ensure_default_database, open_database
+from service.core.pipeline import SolveOptions, solve
+from service.core.presets import PRESETS
+from service.core.sim import SimConfig, simulate_frames
+from service.core.warmup import warm_up
+
+def loaded():
+    return {f"{d.py_func.__module__}.{d.py_func.__name__}": len(d.signatures)
+            for d in gc.get_objects() if isinstance(d, CPUDispatcher)}
+
+db = open_database(ensure_default_database(build=False))
+warm_up(db)
+before = loaded()
+p = PRESETS["seed002"]
+frames = simulate_frames(p.camera, 400, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0), rng=5)
+options = SolveOptions(centroid_sigma_px=1.0)
+for f in [f for f in frames if 3 <= len(f.centroids.xy) <= 4][:40]:
+    solve(f.centroids, p.camera, db, options=options)
+after = loaded()
+print(json.dumps({k: v for k, v in after.items() if v > before.get(k, 0)}))
+"""
+
+
+def test_a_fresh_worker_loads_no_kernel_on_its_first_sparse_frames(default_set_db) -> None:
+    """In a process of its own (as a server worker is), warm_up leaves no kernel for seed 002's
+    3-4-star frames to load: the unique-triangle proof's pairing (``match._match_rig``) and the
+    small frame's wide screen (``screen.hits_under``) are called from Python, where a compiled
+    caller's cached copy does not serve them; loaded on first use they cost a worker's first
+    such frames 5-9 ms each. (In the test session's own process other tests load them first,
+    so only a fresh process shows it.)"""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from ..conftest import ROOT
+
+    proc = subprocess.run([sys.executable, "-c", LOADS_SCRIPT], cwd=ROOT, capture_output=True, text=True,
+                          timeout=600, env=dict(os.environ))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads(proc.stdout.strip().splitlines()[-1]) == {}

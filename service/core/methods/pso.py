@@ -51,6 +51,23 @@ stars are searched on their own. The observation carries each star's brightness 
 calibrated magnitudes, so the magnitude check compares the order of the three stars'
 brightness with the catalogue's.
 
+Depth (issue 16): the tour runs through every star of the circle, so the catalogue's circle
+and the camera's hold the same stars only when the database is built to the camera's own
+magnitude limit, which is not part of a request. The table therefore holds the records of
+several *cuts* of the database's stars (``depth_steps``, ``DEPTH_STEPS``): every star (the
+limit), then the stars to 0.5, 1.0 and 1.5 Mv brighter, each with the circles, radii and tours
+its own stars give (:func:`depth_cuts`; cut ``c`` keyed ``c * CUT_STRIDE + ...``, so cut 0 is
+the table of one cut of before, and a database built before the cuts, with one, is searched as
+before). Every sky circle and variant is looked up in every cut, first the one whose stars
+(spread evenly) best match the frame's count (both matchings). With robust matching, a second
+pass over the masters meets a frame deeper than a cut: the circles of the master's neighbours
+brighter than a threshold (the frame's rows are brightest first), one per threshold the master
+passes (``_fainter_left_out``); a frame the first pass names costs no more tours than before.
+Every candidate of every cut goes through ``screen_and_grow``, so the verifier's look-elsewhere
+factor counts it. Measured (``bench_pso --sections depth``, docs/methods.md; 100 frames, 0 wrong
+in every cell): issue 16's 12-17 deg 6.5 Mv database, 12-deg frames to 6.0 Mv, 2% -> 57%; seed
+004's camera, frames to 6.0 Mv 16% -> 100%, 5.5 Mv 0% -> 93%, 7.0 Mv 41% -> 99%.
+
 Measured (``bench/bench_pso.py``, docs/methods.md): the deterministic tour makes the catalogue
 and the sky agree; the swarm's tours of 11+ stars often do not, which costs the paper variant
 its rate and ~10x the time.
@@ -73,6 +90,7 @@ from ..verify import Verified
 from ._grow import screen_and_grow
 from ._tour import best_tours, first_three, pso_tour
 from .base import Progress, SolveContext
+from .capability import SKY_DEG2
 
 R_SMALL_DEG = 2.5
 R_LARGE_DEG = 5.0
@@ -83,6 +101,17 @@ MANY = 25
 KEY_STRIDE = 100.0
 """Records are sorted by ``radius code * KEY_STRIDE + tour length (rad)``."""
 MAX_CANDIDATES = 64
+Variant = tuple[IntArray, int, IntArray, int]
+"""A sky circle to look up: its stars (local rows, the master left out), radius code, the stars
+its first three may be drawn from, and the batch its tour is searched in."""
+DEPTH_STEPS = (0.0, 0.5, 1.0, 1.5)
+"""Magnitude cuts of the catalogue the table holds records for, below the database's limit
+(``depth_steps``): a camera shallower than the database sees the stars of a cut, not all."""
+CUT_STRIDE = 1000.0
+"""Cut ``c``'s records are keyed ``c * CUT_STRIDE + radius code * KEY_STRIDE + length``: cut 0
+(every star) keeps the keys of a one-cut table, so a reader that knows no cuts reads cut 0."""
+MIN_CUT_STARS = 100
+"""A cut holding fewer stars than this is not built (nor one holding as many as the last)."""
 
 
 def radius_code(n_neighbours: np.ndarray | int) -> np.ndarray:
@@ -98,6 +127,64 @@ def angle_matrices(vec: FloatArray) -> FloatArray:
     return 2.0 * np.arcsin(np.clip(chord / 2.0, 0.0, 1.0))
 
 
+def depth_cuts(mag: FloatArray, limit: float, steps: list[float]) -> tuple[list[float], list[IntArray]]:
+    """The magnitude cuts a table is built for, and each one's star rows: every star first
+    (the database's own limit), then the stars to ``limit - step`` for each further step;
+    a cut of fewer than ``MIN_CUT_STARS`` stars, or no fewer than the cut before, is left out."""
+    if not steps or steps[0] != 0.0 or any(b <= a for a, b in zip(steps, steps[1:], strict=False)):
+        raise ValueError(f"pso depth_steps {steps!r}: expected 0 first, then increasing steps")
+    cuts, subsets = [limit], [np.arange(len(mag), dtype=np.int64)]
+    for step in steps[1:]:
+        keep = np.flatnonzero(mag <= limit - step)
+        if len(keep) < MIN_CUT_STARS or len(keep) >= len(subsets[-1]):
+            continue
+        cuts.append(round(limit - step, 6))
+        subsets.append(keep)
+    return cuts, subsets
+
+
+def tour_records(vec: FloatArray, radii: tuple[float, float, float], margin: int, progress: Progress
+                 ) -> tuple[IntArray, FloatArray, IntArray, FloatArray, IntArray]:
+    """The tour records of the stars ``vec`` ``(N, 3)``: for every star and every radius the
+    rule picks for its neighbour count within ``margin``, the radius code, the tour length,
+    the tour's first three stars (rows of ``vec``), their sides and the circle's star count."""
+    tree = cKDTree(vec)
+    progress("neighbours", 0.0)
+    neigh = [tree.query_ball_point(vec, float(chord_from_angle(math.radians(r)))) for r in radii]
+    n0 = np.array([len(x) - 1 for x in neigh[1]])
+    codes = np.stack([radius_code(n0 + k) for k in range(-margin, margin + 1)], axis=1)
+    centre, code, members = [], [], []
+    for i in range(len(vec)):
+        for c in np.unique(codes[i]):
+            mem = [j for j in neigh[int(c)][i] if j != i]
+            if len(mem) >= 2:
+                centre.append(i)
+                code.append(int(c))
+                members.append(np.asarray(mem, np.int64))
+    size = np.array([len(m) for m in members], np.int64)
+    n_rec = len(centre)
+    length = np.zeros(n_rec)
+    ids = np.zeros((n_rec, 3), np.int64)
+    sides = np.zeros((n_rec, 3))
+    centre_a = np.asarray(centre, np.int64)
+    done = 0
+    for k in np.unique(size):
+        rows = np.flatnonzero(size == k)
+        for lo in range(0, len(rows), 4096):
+            part = rows[lo:lo + 4096]
+            nodes = np.column_stack([centre_a[part], np.stack([members[r] for r in part])])
+            d = angle_matrices(vec[nodes])
+            order, tour_len = best_tours(d)
+            s2, s3 = first_three(d, order)
+            b = np.arange(len(part))
+            length[part] = tour_len
+            ids[part] = np.column_stack([nodes[:, 0], nodes[b, s2], nodes[b, s3]])
+            sides[part] = np.column_stack([d[b, 0, s2], d[b, s2, s3], d[b, 0, s3]])
+            done += len(part)
+            progress(f"tours ({k + 1} stars)", done / max(n_rec, 1))
+    return np.asarray(code, np.int64), length, ids, sides, size
+
+
 class Pso:
     name = "pso"
     summary = "shortest closed tour of a star's neighbours, hybrid particle swarm (seed 004)"
@@ -108,54 +195,38 @@ class Pso:
         r0 = float(params.get("radius_deg", 4.0))
         margin = int(params.get("count_margin", 2))
         radii = (R_SMALL_DEG, r0, R_LARGE_DEG)
-        vec = stars.vec
-        tree = cKDTree(vec)
-        progress("neighbours", 0.0)
-        neigh = [tree.query_ball_point(vec, float(chord_from_angle(math.radians(r)))) for r in radii]
-        n0 = np.array([len(x) - 1 for x in neigh[1]])
-        codes = np.stack([radius_code(n0 + k) for k in range(-margin, margin + 1)], axis=1)
-        centre, code, members = [], [], []
-        for i in range(len(vec)):
-            for c in np.unique(codes[i]):
-                mem = [j for j in neigh[int(c)][i] if j != i]
-                if len(mem) >= 2:
-                    centre.append(i)
-                    code.append(int(c))
-                    members.append(np.asarray(mem, np.int64))
-        size = np.array([len(m) for m in members])
-        n_rec = len(centre)
-        length = np.zeros(n_rec)
-        ids = np.zeros((n_rec, 3), np.int64)
-        sides = np.zeros((n_rec, 3))
-        centre_a = np.asarray(centre, np.int64)
+        limit = float(getattr(config, "mag_limit", float(np.max(stars.mag, initial=0.0))))
+        cuts, subsets = depth_cuts(np.asarray(stars.mag, np.float64), limit,
+                                   [float(x) for x in params.get("depth_steps", DEPTH_STEPS)])
+        keys, ids, sides, sizes = [], [], [], []
+        total = sum(len(k) for k in subsets)
         done = 0
-        for k in np.unique(size):
-            rows = np.flatnonzero(size == k)
-            for lo in range(0, len(rows), 4096):
-                part = rows[lo:lo + 4096]
-                nodes = np.column_stack([centre_a[part], np.stack([members[r] for r in part])])
-                d = angle_matrices(vec[nodes])
-                order, tour_len = best_tours(d)
-                s2, s3 = first_three(d, order)
-                b = np.arange(len(part))
-                length[part] = tour_len
-                ids[part] = np.column_stack([nodes[:, 0], nodes[b, s2], nodes[b, s3]])
-                sides[part] = np.column_stack([d[b, 0, s2], d[b, s2, s3], d[b, 0, s3]])
-                done += len(part)
-                progress(f"tours ({k + 1} stars)", done / max(n_rec, 1))
-        key = np.asarray(code, np.float64) * KEY_STRIDE + length
+        for c, keep in enumerate(subsets):
+            def sub(stage: str, frac: float, c: int = c, base: int = done, n: int = len(keep)) -> None:
+                progress(f"cut {cuts[c]:g} Mv: {stage}", (base + frac * n) / max(total, 1))
+            code, length, ids_c, sides_c, size_c = tour_records(stars.vec[keep], radii, margin, sub)
+            keys.append(c * CUT_STRIDE + code * KEY_STRIDE + length)
+            ids.append(keep[ids_c])
+            sides.append(sides_c)
+            sizes.append(size_c)
+            done += len(keep)
+        key = np.concatenate(keys)
+        size = np.concatenate(sizes)
         order_k = np.argsort(key, kind="stable")
         tables: dict[str, np.ndarray] = {
             "key": key[order_k],
-            "ids": ids[order_k].astype(np.int32),
-            "sides": sides[order_k].astype(np.float32),
+            "ids": np.concatenate(ids)[order_k].astype(np.int32),
+            "sides": np.concatenate(sides)[order_k].astype(np.float32),
             "size": size[order_k].astype(np.uint8 if size.max(initial=0) < 256 else np.uint16),
         }
+        n_rec = len(key)
         meta: dict[str, Any] = {
             "radius_deg": r0, "radii_deg": list(radii), "few": FEW, "many": MANY, "count_margin": margin,
             "n_records": int(n_rec), "sky_tour": str(params.get("sky_tour", "exact")),
             "matching": str(params.get("matching", "robust")),
             "max_masters": int(params.get("max_masters", 8)),
+            "cuts_mag": cuts, "cut_stars": [len(k) for k in subsets], "cut_records": [len(k) for k in keys],
+            "cut_stride": CUT_STRIDE,
         }
         progress(f"{n_rec} tours", 1.0)
         return tables, meta
@@ -184,6 +255,10 @@ class PsoMatcher:
         self.vec = db.stars.vec
         self.mag = np.asarray(db.stars.mag, np.float64)
         self.tours = 0  # tours searched (diagnostics)
+        self.candidates = 0  # candidate triples handed to screen_and_grow, every cut's (diagnostics)
+        self.cuts = [float(c) for c in prm.get("cuts_mag", [db.mag_limit])]
+        self.cut_stars = [int(n) for n in prm.get("cut_stars", [len(db.stars)])]
+        self.cut_stride = float(prm.get("cut_stride", CUT_STRIDE))
 
     # ---- sky side ----------------------------------------------------------------------------
     def identify(self, ctx: SolveContext) -> Verified | None:
@@ -196,16 +271,34 @@ class PsoMatcher:
             d = pairwise_angles(obs.vec[rows])
             eligible = np.flatnonzero(edge > self.radii[1])[: self.max_masters]
             off_axis = np.arccos(np.clip(v_cam[eligible, 2], -1.0, 1.0))
-            for m in eligible[np.argsort(off_axis, kind="stable")]:
-                if ctx.expired():
-                    return None
-                found = self._try_master(ctx, rows, d, edge, int(m))
-                if found is not None:
-                    return found
+            cuts = self.cut_order(obs.cameras[c], len(rows))
+            # the circles as seen, then (a table with cuts, robust matching) those of a frame
+            # deeper than a cut: every master's first, so a frame the first pass names costs
+            # no more tours than before the cuts
+            deeper = (False, True) if len(self.cuts) > 1 and self.matching == "robust" else (False,)
+            for fainter in deeper:
+                for m in eligible[np.argsort(off_axis, kind="stable")]:
+                    if ctx.expired():
+                        return None
+                    found = self._try_master(ctx, rows, d, edge, int(m), cuts, fainter)
+                    if found is not None:
+                        return found
         return None
 
+    def cut_order(self, camera: Camera, n_observed: int) -> list[int]:
+        """The magnitude cuts to search, the one whose catalogue stars (spread evenly over the
+        sky) best match the ``n_observed`` stars of ``camera``'s frame first, then by how far
+        off they are (ties: the deeper first)."""
+        if len(self.cuts) == 1:
+            return [0]
+        area = camera.fov_deg * camera.fov_y_deg / SKY_DEG2
+        off = [abs(math.log(max(n * area, 1e-9) / max(n_observed, 1))) for n in self.cut_stars]
+        return sorted(range(len(self.cuts)), key=lambda k: (off[k], k))
+
     def _try_master(self, ctx: SolveContext, rows: IntArray, d: FloatArray, edge: FloatArray,
-                    m: int) -> Verified | None:
+                    m: int, cuts: list[int], fainter: bool = False) -> Verified | None:
+        """Master ``m``'s circle and its variants, their tours looked up in each of ``cuts``;
+        ``fainter``: instead, the circles without the stars fainter than a threshold."""
         dm = d[m]
         others = np.flatnonzero(np.arange(len(dm)) != m)
         code = int(radius_code(int((dm[others] <= self.radii[1]).sum())))
@@ -214,36 +307,63 @@ class PsoMatcher:
             return None
         tol = ctx.tol_rad
         inside = others[dm[others] <= r]
-        variants = [(inside, 0)]  # (members, the batch its tour is searched in)
+        pool = np.union1d(inside, others[np.abs(dm[others] - r) <= tol])
+        variants: list[Variant] = [(inside, code, pool, 0)]
         if self.matching == "robust":
             near = others[np.abs(dm[others] - r) <= tol]
             near = near[np.argsort(np.abs(dm[near] - r), kind="stable")][:2]
             for flip in range(1, 1 << len(near)):
                 flipped = {int(near[b]) for b in range(len(near)) if flip >> b & 1}
-                variants.append((np.array(sorted(set(inside.tolist()) ^ flipped), np.int64), flip))
+                members = np.array(sorted(set(inside.tolist()) ^ flipped), np.int64)
+                variants.append((members, code, pool, flip))
             # a star the catalogue lacks (a false star) in the circle: the tour without it (one
             # batch: the local search is vectorised over it, 2-9x faster than one tour at a time)
-            variants += [(np.delete(inside, k), 4) for k in range(len(inside))]
-        pool = np.union1d(inside, others[np.abs(dm[others] - r) <= tol])
+            variants += [(np.delete(inside, k), code, pool, 4) for k in range(len(inside))]
+        if fainter:
+            variants = self._fainter_left_out(dm, others, edge[m], m, tol, variants)
         tours: dict[int, tuple[float, int, int]] = {}
-        for i, (members, batch) in enumerate(variants):
+        for i, (members, code_i, pool_i, batch) in enumerate(variants):
             if len(members) < 2 or ctx.expired():
                 continue
             nodes = np.concatenate([[m], members])
             if i not in tours:
-                todo = [j for j, v in enumerate(variants) if v[1] == batch and len(v[0]) >= 2]
+                todo = [j for j, v in enumerate(variants) if v[3] == batch and len(v[0]) >= 2]
                 tours.update(zip(todo, self._tours(d, m, [variants[j][0] for j in todo]), strict=True))
             length, s2, s3 = tours[i]
-            win = self._window(code, length, len(nodes), tol)
-            if len(win) == 0:
-                continue
-            if self.matching == "paper":
-                found = self._paper(ctx, rows, d, m, nodes[s2], nodes[s3], win)
-            else:
-                found = self._robust(ctx, rows, d, m, pool, win)
-            if found is not None:
-                return found
+            for cut in cuts:  # each tour in every cut: it is the tour's cost, not the look-up's
+                win = self._window(code_i, length, len(nodes), tol, cut)
+                if len(win) == 0:
+                    continue
+                if self.matching == "paper":
+                    found = self._paper(ctx, rows, d, m, nodes[s2], nodes[s3], win)
+                else:
+                    found = self._robust(ctx, rows, d, m, pool_i, win)
+                if found is not None:
+                    return found
         return None
+
+    def _fainter_left_out(self, dm: FloatArray, others: IntArray, edge: float, m: int, tol: float,
+                          have: list[Variant]) -> list[Variant]:
+        """The circles of a frame deeper than a cut: the master's neighbours brighter than a
+        threshold (rows are brightest first), for every threshold the master itself passes,
+        each with the radius its own count picks; those the list ``have`` lacks."""
+        near5 = others[dm[others] <= self.radii[2] + tol]  # every star a circle or its edge can hold
+        seen = {tuple(v[0].tolist()) for v in have}
+        out = []
+        for t in range(len(near5) - 1, 1, -1):
+            if m > near5[t]:
+                break  # the master is fainter than a star this threshold leaves out
+            kept = near5[:t]
+            code = int(radius_code(int((dm[kept] <= self.radii[1]).sum())))
+            r = self.radii[code]
+            if edge <= r:
+                continue
+            members = kept[dm[kept] <= r]
+            if len(members) < 2 or tuple(members.tolist()) in seen:
+                continue
+            seen.add(tuple(members.tolist()))
+            out.append((members, code, np.union1d(members, kept[np.abs(dm[kept] - r) <= tol]), 5 + t))
+        return out
 
     def _tours(self, d: FloatArray, m: int, sets: list[IntArray]) -> list[tuple[float, int, int]]:
         """Tours from master ``m`` through each of ``sets`` (equally many stars each): length,
@@ -260,11 +380,12 @@ class PsoMatcher:
         s2, s3 = first_three(dn, order)
         return [(float(a), int(b), int(c)) for a, b, c in zip(lengths, s2, s3, strict=True)]
 
-    def _window(self, code: int, length: float, n_nodes: int, tol: float) -> IntArray:
-        """Records of radius ``code`` whose tour length is within tolerance of ``length``:
-        each of the ``n_nodes`` stars moves the length by at most ~``tol``, independently."""
+    def _window(self, code: int, length: float, n_nodes: int, tol: float, cut: int = 0) -> IntArray:
+        """Records of magnitude cut ``cut`` and radius ``code`` whose tour length is within
+        tolerance of ``length``: each of the ``n_nodes`` stars moves the length by at most
+        ~``tol``, independently."""
         tol_len = tol * math.sqrt(n_nodes)
-        base = code * KEY_STRIDE + length
+        base = cut * self.cut_stride + code * KEY_STRIDE + length
         lo, hi = np.searchsorted(self.key, [base - tol_len, base + tol_len])
         return np.arange(lo, hi)
 
@@ -334,6 +455,7 @@ class PsoMatcher:
         them fits an attitude good enough for the verifier to extend over the whole field.
         """
         near = np.flatnonzero(d[tri[0]] <= self.radii[2])
+        self.candidates += len(cands)
         return screen_and_grow(ctx, rows[tri], cands, rows[near])
 
     def _discordance(self, obs_tri: IntArray, cat: IntArray) -> IntArray:

@@ -157,20 +157,22 @@ def test_a_refusal_without_another_method_says_to_build_one() -> None:
         "pso cannot serve here: why; use auto or maxangle"
 
 
-def test_pso_on_a_database_deeper_than_the_camera_says_why(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """The issue's 1.5%: a 6.5 Mv database, 12-deg frames to 6.0 Mv. No check sees the camera's
-    limit, so the answer's message says what pso needs; frames to 6.5 Mv solve."""
+def test_pso_on_a_database_deeper_than_the_camera_solves_it(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The issue's 2%: a 6.5 Mv database, 12-deg frames to 6.0 Mv. pso's table holds the stars to
+    6.0 Mv as a cut of their own: about half the frames solve (57 of 100 in docs/methods.md; 2
+    of 100, and 0-1 of these 20, on a table of one cut); the circle of the others does not fit
+    the field, and their message says what pso needs. Frames to 6.5 Mv solve as before."""
     from service.core.navdb import BuildConfig
 
     path = tmp_path_factory.mktemp("deep") / "db"
     db = open_database(build_database(path, BuildConfig(fov_min_deg=12.0, fov_max_deg=17.0, mag_limit=6.5,
                                                         epoch=2026.0, methods=("pso",))))
     cam = Camera.from_fov(12.0, 1024, 1024)
-    shallow = simulate_frames(cam, 10, SimConfig(mag_limit=6.0, centroid_noise_px=SIGMA), rng=5)
-    answers = [solve(f.centroids, cam, db, method="pso", options=OPTIONS) for f in shallow]
-    assert sum(a.solved for a in answers) <= 1
-    missed = next(a for a in answers if not a.solved)
+    shallow = simulate_frames(cam, 20, SimConfig(mag_limit=6.0, centroid_noise_px=SIGMA), rng=5)
+    assert _right(db, "pso", cam, shallow) >= 8
+    missed = next(a for a in (solve(f.centroids, cam, db, method="pso", options=OPTIONS) for f in shallow)
+                  if not a.solved)
     assert missed.reason is not NoSolutionReason.CAMERA_OUTSIDE_DATABASE  # searched, not refused
-    assert "needs a database built to the camera's own magnitude limit" in missed.message
+    assert "a database built before these cuts only to its limit" in missed.message
     full = simulate_frames(cam, 10, SimConfig(mag_limit=6.5, centroid_noise_px=SIGMA), rng=5)
     assert _right(db, "pso", cam, full) >= 8

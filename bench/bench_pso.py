@@ -230,7 +230,7 @@ def stress(tmp: Path, frames_n: int) -> list[dict[str, Any]]:
                   for f in frames]
             for i, j in enumerate(js):
                 if j.solved and j.wrong:
-                    print(f"WRONG {name}: SimConfig({sim}), rng={1000 + k}, frame {i}", flush=True)
+                    print(f"WRONG {name}: {sim}, rng={1000 + k}, frame {i}", flush=True)
             rows.append({"camera": name, "frames_mag": mag, "noise_px": noise, "false_stars": false,
                          "mag_noise": mag_noise, **summarize(js)})
             print(json.dumps({k2: rows[-1][k2] for k2 in ("camera", "frames_mag", "noise_px", "false_stars",

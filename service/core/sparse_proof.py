@@ -130,6 +130,19 @@ def check_unique_triangle(
     return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), prob, looks)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _triangle_rows(obs_vec: np.ndarray, star_vec: np.ndarray, obs_idx: np.ndarray,
+                   cat_idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The observed rows ``obs_idx`` and catalogue rows ``cat_idx`` of a matched triangle, (3, 3) each."""
+    o = np.empty((3, 3))
+    c = np.empty((3, 3))
+    for i in range(3):
+        for a in range(3):
+            o[i, a] = obs_vec[obs_idx[i], a]
+            c[i, a] = star_vec[cat_idx[i], a]
+    return o, c
+
+
 @njit(cache=True, nogil=True)
 def _triangle_fit(obs_vec: np.ndarray, star_vec: np.ndarray, obs_idx: np.ndarray, cat_idx: np.ndarray,
                   radius: float) -> tuple[bool, np.ndarray, float]:
@@ -138,12 +151,7 @@ def _triangle_fit(obs_vec: np.ndarray, star_vec: np.ndarray, obs_idx: np.ndarray
     stars lies within ``radius`` (rad, chord) of its prediction, and ``delta``, the largest of
     the three side mismatches (rad). As :func:`~.attitude.wahba_svd`, ``np.linalg.norm`` and
     :func:`~.geometry.pairwise_angles` computed them (the numpy steps took ~35 us a triangle)."""
-    o = np.empty((3, 3))
-    c = np.empty((3, 3))
-    for i in range(3):
-        for a in range(3):
-            o[i, a] = obs_vec[obs_idx[i], a]
-            c[i, a] = star_vec[cat_idx[i], a]
+    o, c = _triangle_rows(obs_vec, star_vec, obs_idx, cat_idx)
     r = wahba_kernel(o, c, np.ones(3))
     ok = True
     for i in range(3):
@@ -153,13 +161,28 @@ def _triangle_fit(obs_vec: np.ndarray, star_vec: np.ndarray, obs_idx: np.ndarray
             s += d * d
         if math.sqrt(s) > radius:
             ok = False
+    return ok, r, _mismatch(o, c)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _mismatch(o: np.ndarray, c: np.ndarray) -> float:
+    """The largest of the three side mismatches (rad) of the triangles of rows ``o`` and ``c``
+    (3, 3), each side as :func:`~.geometry.pairwise_angles` measures it."""
     d_obs = pairwise_angles_kernel(o)
     d_cat = pairwise_angles_kernel(c)
     delta = 0.0
     for i in range(3):
         for j in range(3):
             delta = max(delta, abs(d_obs[i, j] - d_cat[i, j]))
-    return ok, r, delta
+    return delta
+
+
+@njit(cache=True, nogil=True)
+def triangle_mismatch(obs_vec: np.ndarray, star_vec: np.ndarray, obs_idx: np.ndarray, cat_idx: np.ndarray) -> float:
+    """The largest side mismatch (rad) of observed rows ``obs_idx`` against catalogue rows
+    ``cat_idx`` (the ``delta`` of :func:`check_unique_triangle`; numpy's steps took ~8 us)."""
+    o, c = _triangle_rows(obs_vec, star_vec, obs_idx, cat_idx)
+    return _mismatch(o, c)
 
 
 @njit(cache=True, nogil=True)
@@ -369,6 +392,7 @@ def warm_up_screens(db: NavDatabase, camera: Camera, frame: Centroids) -> None:
         _star_in_view(verifier, triples, np.arange(3))
         _sparse_attitudes(obs.vec[:3], star_vec64(db), triples)
         _triangle_fit(np.ascontiguousarray(obs.vec, dtype=np.float64), star_vec64(db), np.arange(3), triples[0], 1e-3)
+        triangle_mismatch(np.ascontiguousarray(obs.vec, dtype=np.float64), star_vec64(db), np.arange(3), triples[0])
         # the kernels a proof and a small frame's screen call from Python, not from a compiled
         # caller (whose cached code holds its own copy): the pairing of a proven match
         # (match._match_rig) and the wide screen (screen.hits_under). Loaded on first use they
@@ -387,26 +411,36 @@ def _field_check(verifier: Verifier, rs: FloatArray, cands: IntArray,
     predicted star within the match radius). Looks at the ``max_near`` catalogue stars nearest
     each boresight; one compiled call per camera (:func:`field_check_kernel`)."""
     obs = verifier.obs
-    stars = star_vec64(verifier.db)
-    unseen = np.zeros(len(rs), dtype=np.int64)
-    explained = np.zeros(len(rs), dtype=np.int64)
     if len(rs) == 0:
-        return unseen, explained
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     rs = np.ascontiguousarray(rs, dtype=np.float64)
     cands = np.ascontiguousarray(cands, dtype=np.int64)
-    cams, dist = _camera_rows(tuple(obs.cameras))
-    for c, cam in enumerate(obs.cameras):
-        half_deg = cam.diagonal_fov_deg / 2 + 0.2
-        half = math.radians(half_deg)
-        g = field_grid(verifier.db, half_deg)
+    stars, per_camera = _field_check_args(verifier)
+    unseen = explained = None
+    for c, (mount, cam, dist, chord, g) in enumerate(per_camera):
         rows = _rows_but(obs.by_camera[c:c + 1], len(obs), obs_idx)
-        u, e = field_check_kernel(rs, cands, np.ascontiguousarray(obs.mountings[c], dtype=np.float64), cams[c],
-                                  dist[c], stars, 2 * math.sin(half / 2), g.cell, g.n_side, g.keys, g.starts,
+        u, e = field_check_kernel(rs, cands, mount, cam, dist, stars, chord, g.cell, g.n_side, g.keys, g.starts,
                                   g.stars, g.columns, max_near, np.ascontiguousarray(obs.xy[rows]),
                                   float(verifier.match_radius_px))
-        unseen += u
-        explained += e
+        unseen, explained = (u, e) if unseen is None else (unseen + u, explained + e)
     return unseen, explained
+
+
+def _field_check_args(verifier: Verifier) -> tuple[np.ndarray, list[tuple[object, ...]]]:
+    """What :func:`field_check_kernel` takes of ``verifier``'s frame that no call changes: the
+    star vectors and, per camera, its mounting, camera and distortion rows, the field's chord
+    and grid (made on the frame's first field check and kept on the verifier: ~8 us a call)."""
+    got = verifier.__dict__.get("_field_check_args")
+    if got is None:
+        obs = verifier.obs
+        cams, dist = _camera_rows(tuple(obs.cameras))
+        per_camera = []
+        for c, cam in enumerate(obs.cameras):
+            half_deg = cam.diagonal_fov_deg / 2 + 0.2
+            per_camera.append((np.ascontiguousarray(obs.mountings[c], dtype=np.float64), cams[c], dist[c],
+                               2 * math.sin(math.radians(half_deg) / 2), field_grid(verifier.db, half_deg)))
+        got = verifier.__dict__["_field_check_args"] = (star_vec64(verifier.db), per_camera)
+    return got
 
 
 @njit(cache=True, nogil=True)
@@ -466,4 +500,5 @@ def field_check_kernel(rs: np.ndarray, cands: np.ndarray, mount: np.ndarray, cam
     return unseen, explained
 
 
-__all__ = ["SPARSE_CONFIDENCE", "SPARSE_MAX_SAMPLE", "check_unique_triangle", "field_check_kernel"]
+__all__ = ["SPARSE_CONFIDENCE", "SPARSE_MAX_SAMPLE", "check_unique_triangle", "field_check_kernel",
+           "triangle_mismatch"]

@@ -42,7 +42,8 @@ import numpy as np
 from ..catalog import StarTable
 from ..geometry import pairwise_angles
 from ..navdb.reader import NavDatabase
-from ..sparse_proof import check_unique_triangle
+from ..sparse_proof import check_unique_triangle, triangle_mismatch
+from ..star_index import star_vec64
 from ..verify import Verified
 from ._pairs import (
     PairLimits,
@@ -260,12 +261,12 @@ class TriangleMatcher:
         is skipped: its proof would name the same sky. Two proofs naming different skies are
         ambiguous: no answer."""
         n_looks = math.comb(n, 3)
-        vec = self.vec
-        obs_vec = ctx.obs.vec
+        vec = star_vec64(ctx.verifier.db)
+        obs_vec = np.ascontiguousarray(ctx.obs.vec, dtype=np.float64)
 
         def mismatch(tri: tuple[np.ndarray, np.ndarray]) -> float:
             idx, cat = tri
-            return float(np.max(np.abs(pairwise_angles(obs_vec[idx]) - pairwise_angles(vec[cat]))))
+            return triangle_mismatch(obs_vec, vec, np.asarray(idx, np.int64), np.asarray(cat, np.int64))
 
         best: Verified | None = None
         for idx, cat in sorted(unique, key=mismatch):

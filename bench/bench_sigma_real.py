@@ -1,6 +1,6 @@
 """The real images: attitude error against the reference and the reported 1-sigma, per image set.
 
-    python -m bench.bench_sigma_real [--loo]
+    python -m bench.bench_sigma_real [--loo] [--split SIGMA_PX,...]
 
 Each image's centroid list (matches.json, as ``bench_sigma --real`` uses it) is solved by
 ``auto`` on the default database with ``centroid_sigma_px`` = 1, on a pinhole camera of the
@@ -12,6 +12,13 @@ standard deviation of error / sigma, and how many frames the residual-field test
 ``--loo`` adds the distortion test on the eight tetra3 TIFFs: each frame solved with the
 camera calibrated (``f_px``, ``k1``; principal point at the centre, as the reference's) on the
 other seven, against the nominal 11.4-deg and the reference-field pinhole cameras.
+
+``--split`` adds a test that needs no reference: each solved frame's paired centroids are split
+in two (alternate stars by brightness), each half is solved on its own by ``auto``, and the
+difference of the two attitudes is divided by ``sqrt(sigma_A^2 + sigma_B^2)``, each half's
+reported 1-sigma. Its standard deviation over the frames is 1 when the reported sigma predicts
+the error that the centroids' own scatter makes (not an error both halves share, such as an
+unmodelled distortion), at each declared ``centroid_sigma_px`` listed.
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from service.core.geometry import radec_to_vector  # noqa: E402
 from service.core.navdb import ensure_default_database, open_database  # noqa: E402
 from service.core.pipeline import SolveOptions, solve  # noqa: E402
 from service.core.residual_field import field_fit, field_inflation  # noqa: E402
+from service.core.types import Centroids  # noqa: E402
 
 from .bench_sigma import axis_errors_arcsec  # noqa: E402
 from .real_reference import rigid_references  # noqa: E402
@@ -151,8 +159,44 @@ def leave_one_out(frames: Sequence[common.RealFrame], db, refs) -> str:
     return "\n".join(lines)
 
 
-def run(loo: bool = False) -> str:
-    """Both tables as markdown."""
+def split_halves(frames: Sequence[common.RealFrame], db, sigma_px: float) -> tuple[np.ndarray, int]:
+    """Per frame whose two halves both solve, naming the stars as the whole frame did: the two
+    halves' attitude difference over their combined 1-sigma (x / y / roll), and the number of
+    frames the whole solved."""
+    options = SolveOptions(centroid_sigma_px=sigma_px)
+    z, solved = [], 0
+    for f in frames:
+        whole = solve(f.centroids, f.camera, db, options=options)
+        if not whole.solved:
+            continue
+        solved += 1
+        hip = {s.centroid: s.hip for s in whole.stars}
+        rows = sorted(hip)
+        halves = []
+        xy, flux = np.asarray(f.centroids.xy), np.asarray(f.centroids.flux)
+        for part in (rows[0::2], rows[1::2]):
+            sol = solve(Centroids(xy[part], flux[part]), f.camera, db, options=options)
+            named = sol.solved and all(s.hip == hip[part[s.centroid]] for s in sol.stars)
+            if named and sol.attitude_sigma_arcsec:
+                halves.append(sol)
+        if len(halves) == 2:
+            d = axis_errors_arcsec(halves[0].quaternion, halves[1].quaternion)
+            z.append(d / np.hypot(halves[0].attitude_sigma_arcsec, halves[1].attitude_sigma_arcsec))
+    return np.array(z).reshape(-1, 3), solved
+
+
+def split_table(frames: Sequence[common.RealFrame], db, sigmas: Sequence[float]) -> str:
+    """The split-half test at each declared centroid sigma, as markdown."""
+    lines = ["| declared centroid_sigma_px | frames with both halves solved "
+             "| std(difference / combined sigma) x / y / roll |", "|---|---|---|"]
+    for sigma in sigmas:
+        z, solved = split_halves(frames, db, sigma)
+        lines.append(f"| {sigma:g} | {len(z)}/{solved} | {_trio(z.std(0), 2)} |")
+    return "\n".join(lines)
+
+
+def run(loo: bool = False, split: Sequence[float] = ()) -> str:
+    """The tables as markdown."""
     db = open_database(ensure_default_database())
     frames = common.real_frames()
     refs = rigid_references(common.REAL_DIR)
@@ -165,6 +209,8 @@ def run(loo: bool = False) -> str:
              f"boresight offset from (W/2, H/2): median {np.median(centre):.3f} px")
     if loo:
         text += "\n\n" + leave_one_out(frames, db, refs)
+    if split:
+        text += "\n\n" + split_table(frames, db, split)
     return text
 
 
@@ -172,7 +218,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loo", action="store_true",
                     help="add the leave-one-out calibration test on the tetra3 frames")
-    print(run(ap.parse_args(argv).loo))
+    ap.add_argument("--split", default="",
+                    help="declared centroid sigmas (px, comma-separated) for the split-half test")
+    args = ap.parse_args(argv)
+    print(run(args.loo, [float(v) for v in args.split.split(",") if v]))
 
 
 if __name__ == "__main__":

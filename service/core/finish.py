@@ -22,7 +22,7 @@ from .blends import dominant_pairs
 from .hidden import hidden_kernel, hidden_neighbours
 from .match import CROWD
 from .navdb.reader import NavDatabase
-from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted, too_bright
+from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted_among, too_bright
 from .residuals import distant_pairs
 from .solution import answer
 from .star_index import star_tree
@@ -68,10 +68,12 @@ def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: Fi
         bad[mine] |= hidden_kernel(v.cat[mine], d[mine], pair_mag[mine], hidden, limits, cam.pixel_scale_rad,
                                    CROWD * radius_px)
     if obs.flux is not None:
-        bad |= too_bright(obs.flux[v.obs], pair_mag) | faintest_inverted(obs.flux[v.obs], pair_mag)
+        bad |= too_bright(obs.flux[v.obs], pair_mag)
     if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
         rows = np.unique(np.concatenate([r for r, _ in field])) if field else np.zeros(0, np.int64)
         bad |= beyond_completeness(pair_mag, db.stars.mag[rows], _member(rows, v.cat))
+    if obs.flux is not None:  # last: the faintest pair against the pairs the others keep
+        bad |= faintest_inverted_among(obs.flux[v.obs], pair_mag, bad)
     return bad
 
 

@@ -123,7 +123,7 @@ def check_unique_triangle(
     if prob > verifier.max_false_prob:
         return None
     # the pairing last: it decides nothing the steps above read (~28 us, and it refused none of
-    # seed 002's 1,104 unique triangles whose field held no unseen star, session 31)
+    # seed 002's 1,104 unique triangles whose field held no unseen star, session 30)
     m_obs, m_cat, _ = verifier._match_all(r)
     if not set(obs_idx.tolist()) <= set(m_obs.tolist()):  # every star of the triangle paired
         return None
@@ -396,7 +396,7 @@ def warm_up_screens(db: NavDatabase, camera: Camera, frame: Centroids) -> None:
         # the kernels a proof and a small frame's screen call from Python, not from a compiled
         # caller (whose cached code holds its own copy): the pairing of a proven match
         # (match._match_rig) and the wide screen (screen.hits_under). Loaded on first use they
-        # cost a worker's first 3-4-star frames 5-9 ms each (session 31)
+        # cost a worker's first 3-4-star frames 5-9 ms each (session 30)
         verifier._match_all(np.eye(3))
         verifier._wide_hits(np.arange(3), triples[0], np.arange(n), 3)
     _without_triple(triples, 0, 1, 2)

@@ -307,11 +307,11 @@ class PsoMatcher:
             return None
         tol = ctx.tol_rad
         inside = others[dm[others] <= r]
-        pool = np.union1d(inside, others[np.abs(dm[others] - r) <= tol])
+        on_edge = others[np.abs(dm[others] - r) <= tol]  # in on one side, out on the other
+        pool = np.union1d(inside, on_edge)
         variants: list[Variant] = [(inside, code, pool, 0)]
         if self.matching == "robust":
-            near = others[np.abs(dm[others] - r) <= tol]
-            near = near[np.argsort(np.abs(dm[near] - r), kind="stable")][:2]
+            near = on_edge[np.argsort(np.abs(dm[on_edge] - r), kind="stable")][:2]
             for flip in range(1, 1 << len(near)):
                 flipped = {int(near[b]) for b in range(len(near)) if flip >> b & 1}
                 members = np.array(sorted(set(inside.tolist()) ^ flipped), np.int64)

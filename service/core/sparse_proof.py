@@ -27,12 +27,11 @@ from .navdb.reader import NavDatabase
 from .screen import frame_columns
 from .skygrid import collect_within, has_star_within_away, star_qualifies
 from .skymask import may_hold_star
+from .sparse_others import SPARSE_CONFIDENCE, prove_with_others
 from .star_index import field_grid, sky_grid, sky_mask, star_neighbours, star_vec64
 from .types import Centroids, FloatArray, IntArray
 from .verify import Verified, Verifier
 
-SPARSE_CONFIDENCE = 0.95
-"""Confidence of the Poisson upper bound on the local density of consistent triangles."""
 SPARSE_MAX_SAMPLE = 3000
 """At most this many catalogue triples of the density box are projected (a random sample)."""
 _K_UP_NONE = float(gammaincinv(1, SPARSE_CONFIDENCE))
@@ -46,6 +45,9 @@ def check_unique_triangle(
     *,
     density_box: Callable[[Callable[[float], bool]], tuple[IntArray, float] | None],
     n_looks: int,
+    unique_within_rad: float | None = None,
+    sample_box: Callable[[float], IntArray] | None = None,
+    max_width_rad: float = math.inf,
 ) -> Verified | None:
     """Prove a frame too sparse for a fourth star by a triangle that matched one catalogue triple.
 
@@ -69,6 +71,12 @@ def check_unique_triangle(
     duty), its own field is consistent, and ``n_looks * E <= max_false_prob``, ``n_looks`` being
     the number of observed triangles the method could have tried.
 
+    Where the match explains another observed star and the caller says the match was alone
+    within ``unique_within_rad`` (rad) on all three sides, the shortcut
+    :func:`~.sparse_others.prove_with_others` is tried first: that star's binomial tail in
+    place of the box's count of triangles explaining it (``sample_box(W)``, the catalogue
+    triples within ``W``; ``max_width_rad`` the widest it reads).
+
     Returns the proven match (``false_prob = n_looks * E``), or None.
     """
     obs = verifier.obs
@@ -85,6 +93,11 @@ def check_unique_triangle(
     if unseen[0] > 0:
         return None
     looks = max(n_looks, 1)
+    if explained[0] > 0 and unique_within_rad is not None:
+        found = prove_with_others(verifier, r, obs_idx, cat_idx, delta, looks, unique_within_rad, sample_box,
+                                  max_width_rad)
+        if found is not None:
+            return found
 
     def worth(width: float, thin: float = 1.0) -> bool:
         """Could a box of half-width ``width`` (rad) prove the match? Its best case, k = 0."""

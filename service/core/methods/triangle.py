@@ -272,8 +272,13 @@ class TriangleMatcher:
         for idx, cat in sorted(unique, key=mismatch):
             if best is not None and _names(best, idx, cat):
                 continue
+            v = obs_vec[idx]
+            d = pairwise_angles(v)
             found = check_unique_triangle(ctx.verifier, idx, cat, n_looks=n_looks,
-                                          density_box=functools.partial(self._density_box, obs_vec[idx], eps))
+                                          density_box=functools.partial(self._density_box, v, eps),
+                                          unique_within_rad=eps,
+                                          sample_box=functools.partial(self.box_triples, v),
+                                          max_width_rad=min(d[0, 1], d[0, 2], d[1, 2]) / 4)
             if found is None:
                 continue
             if best is not None and not np.array_equal(np.sort(best.cat), np.sort(found.cat)):

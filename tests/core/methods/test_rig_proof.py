@@ -14,8 +14,19 @@ import pytest
 
 from service.core.attitude import quat_to_matrix
 from service.core.evaluate import score
+from service.core.geometry import pairwise_angles
 from service.core.methods import get_matcher
-from service.core.methods.rig_proof import cross_triples, free_weight, prove_sparse_rig
+from service.core.methods.rig_proof import (
+    BOX_TARGET,
+    SMALL_BOX_ROOM,
+    TESTS,
+    Slack,
+    _bound,
+    cross_triples,
+    free_weight,
+    prove_sparse_rig,
+    sky_limits,
+)
 from service.core.navdb import NavDatabase, build_database, open_database
 from service.core.pipeline import SolveOptions, _observation, solve_rig
 from service.core.presets import PRESETS
@@ -243,3 +254,40 @@ def test_a_sparse_rig_frame_the_default_set_refuses_is_told_how_to_build_the_dat
             proven += 1
             assert correct(own, f)
     assert told >= 3 and proven >= 2
+
+
+def test_a_four_star_frame_is_proven_from_a_narrow_box(db: NavDatabase, frames: list[RigFrame]) -> None:
+    """``H`` is known before any box is read: a (2, 2) frame's true base triangle is proven from
+    the box in which an empty count would prove it ``SMALL_BOX_ROOM`` times over: narrower than the
+    usual first box (12 tolerances), and a few hundred triples at most where the usual box grows
+    to ``BOX_TARGET`` (2,000), with a factor of ``TESTS`` on ``E``."""
+    matcher = get_matcher(db, "multifov")
+    tested = 0
+    for f in frames:
+        if tuple(sorted(split(f))) != (2, 2) or not all(np.all(c.hip >= 0) for c in f.frames):
+            continue
+        inputs = f.inputs(RIG)
+        obs = _observation(inputs, [quat_to_matrix(np.asarray(q, float)) for _, _, q in inputs])
+        v = Verifier(db, obs, match_radius_px=2.5)
+        a, b = obs.by_camera[0][:2]
+        tri = np.array([a, b, obs.by_camera[1][0]])
+        hip = [f.frames[obs.camera[r]].hip[obs.index[r]] for r in tri]
+        sky = sky_limits(db)[0]
+        match = np.array([sky.index[int(np.flatnonzero(db.stars.hip == h)[0])] for h in hip])
+        m = np.array([0, 1])  # the free star: the other one of camera 1
+        tol = (3.0 * math.sqrt(2.0) * SIGMA + 0.5) * obs.pixel_scale_rad
+        n_looks = 96
+        e = _bound(v, matcher.lookup, sky, obs.vec[tri], match, m, tol, Slack(), n_looks)
+        delta = float(np.max(np.abs(pairwise_angles(obs.vec[tri]) - pairwise_angles(sky.vec[match]))))
+        h = free_weight(v, m)
+        w_small = delta * (SMALL_BOX_ROOM * TESTS * 3.0 * h * n_looks / v.max_false_prob) ** (1 / 3)
+        assert 0 < w_small < 12 * tol
+        small = cross_triples(matcher.lookup, sky.vec, obs.vec[tri], (w_small,) * 3, sky.index)
+        first = cross_triples(matcher.lookup, sky.vec, obs.vec[tri], (12 * tol,) * 3, sky.index)
+        assert len(small) <= len(first) and len(small) < BOX_TARGET / 4
+        assert e * n_looks <= v.max_false_prob
+        assert e >= TESTS * 2.99 * h * (delta / w_small) ** 3  # k_up(0) = 3.0, the factor kept
+        tested += 1
+        if tested == 5:
+            break
+    assert tested == 5

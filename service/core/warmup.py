@@ -19,6 +19,7 @@ from .first_pass import deeper_arrays, settle
 from .hidden import hidden_neighbours
 from .methods import get_matcher
 from .methods.quad import QUERY_STARS
+from .methods.rig_proof import THIRD_STAR_REACH_DEG, cross_triples, sky_limits
 from .navdb.reader import NavDatabase, NavDatabaseSet
 from .pipeline import _ONE_CAMERA, FEW_STARS_MAX_TRIALS, SolveOptions, _observation, solve, solve_rig
 from .plan import RIG_METHOD, search_plan
@@ -177,6 +178,13 @@ def _rigs(db: NavDatabase | NavDatabaseSet, members: list[NavDatabase]) -> None:
             for n in (len(frame), 4):
                 halves = [Centroids(frame.xy[k:n:2], frame.flux[k:n:2]) for k in (0, 1)]
                 solve_rig([(h, camera, ident) for h in halves], db)
+            # the sparse proof's third-star lookup, which those frames need not reach (loaded inside
+            # a request, or compiled there on a cold cache, it took a worker's first sparse frame)
+            sky = sky_limits(member)[0]
+            nearest = np.argsort(-(sky.vec @ sky.vec[0]))[1:3]
+            lookup = get_matcher(member, RIG_METHOD).lookup
+            grid = sky.grid(THIRD_STAR_REACH_DEG)
+            cross_triples(lookup, sky.vec, sky.vec[[0, *nearest]], (1e-4,) * 3, None, grid)
 
 
 def _screens(members: list[NavDatabase]) -> None:

@@ -65,6 +65,7 @@ from ..star_index import FIELD_CELL_DEG, star_vec64
 from ..types import FloatArray, IntArray
 from ..verify import Verified, Verifier
 from ._pairs import same_handedness
+from ._rig_third import third_star_candidates
 
 RIG_SPARSE_MAX_STARS = 8
 """Frames of at most this many stars (all cameras) are offered to the proof."""
@@ -82,6 +83,9 @@ TESTS = 2
 _K_UP_NONE = float(gammaincinv(1, SPARSE_CONFIDENCE))
 LIMIT_STEPS = (0.0, 0.5, 1.0, 1.5)
 """Magnitude limits tried, below the database's faintest star (every one counts in ``n_looks``)."""
+THIRD_STAR_REACH_DEG = 1.0
+"""The reach (deg) the sky grid a base pair's third stars are gathered from is chosen for (its
+smallest cells: a pair's region spans arcseconds to arcminutes)."""
 CHUNK = 512
 """Stars per block of the float32 product that finds each first star's ring of third stars."""
 
@@ -103,11 +107,14 @@ class PairLookup:
 
 
 def cross_triples(lookup: PairLookup, vec: FloatArray, v3: FloatArray, tol: tuple[float, float, float],
-                  index: IntArray | None = None) -> IntArray:
+                  index: IntArray | None = None, grid: SkyGrid | None = None) -> IntArray:
     """Catalogue triples ``(I, J, K)`` ``(K, 3)`` matching the observed body-frame triangle ``v3``
     ``(3, 3)`` (rows ``i, j, k``; ``i``, ``j`` in one camera): ``|ij|`` within ``tol[0]`` (pair
     table), ``|ik|`` within ``tol[1]`` and ``|jk|`` within ``tol[2]`` (every catalogue star
-    tested), same handedness. ``vec`` the catalogue's unit vectors; angles in radians."""
+    tested), same handedness. ``vec`` the catalogue's unit vectors; angles in radians. With
+    ``grid`` (a :class:`~..skygrid.SkyGrid` over ``vec``), each pair's third stars are gathered
+    where they must lie (:func:`~._rig_third.third_star_candidates`); without it, or where a
+    pair's region cannot be bounded, from each first star's ring: the same triples either way."""
     d = pairwise_angles(v3)
     ij = lookup.within(d[0, 1] - tol[0], d[0, 1] + tol[0])
     if index is not None:  # the pairs of a sky's stars, as its rows
@@ -115,15 +122,26 @@ def cross_triples(lookup: PairLookup, vec: FloatArray, v3: FloatArray, tol: tupl
         ij = ij[np.all(ij >= 0, axis=1)]
     if len(ij) == 0:
         return np.zeros((0, 3), np.int64)
-    # every star K at |ik| from each distinct I (a float32 product with the catalogue, in
-    # blocks of I), then each pair (I, J) reads its I's ring and keeps the K at |jk| from J
     lo, hi = math.cos(d[0, 2] + tol[1]) - 1e-6, math.cos(max(d[0, 2] - tol[1], 0.0)) + 1e-6
-    firsts, which = np.unique(ij[:, 0], return_inverse=True)
-    start, ring_k = _rings(np.asarray(vec, np.float32), firsts, lo, hi)
-    counts = start[which + 1] - start[which]
-    pair = np.repeat(np.arange(len(ij)), counts)
-    ks = ring_k[np.repeat(start[which] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))]
     lo_j, hi_j = math.cos(d[1, 2] + tol[2]) - 1e-6, math.cos(max(d[1, 2] - tol[2], 0.0)) + 1e-6
+    got = None
+    side = float(np.sign(np.linalg.det(v3)))
+    if grid is not None and side != 0.0:
+        ok, pair, ks = third_star_candidates(np.ascontiguousarray(ij, dtype=np.int64), vec, lo, hi, lo_j,
+                                             hi_j, side, grid.cell, grid.n_side, grid.keys, grid.starts,
+                                             grid.stars, grid.columns)
+        got = (pair, ks) if ok else None
+    if got is None:
+        # every star K at |ik| from each distinct I (a float32 product with the catalogue, in
+        # blocks of I), then each pair (I, J) reads its I's ring and keeps the K at |jk| from J
+        firsts, which = np.unique(ij[:, 0], return_inverse=True)
+        start, ring_k = _rings(np.asarray(vec, np.float32), firsts, lo, hi)
+        counts = start[which + 1] - start[which]
+        pair = np.repeat(np.arange(len(ij)), counts)
+        at = np.repeat(start[which] - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+        ks = ring_k[at]
+    else:
+        pair, ks = got
     dj = np.einsum("ij,ij->i", vec[ij[pair, 1]], vec[ks])
     keep = (dj >= lo_j) & (dj <= hi_j)
     pair, ks = pair[keep], ks[keep]
@@ -297,13 +315,15 @@ def prove_sparse_rig(verifier: Verifier, lookup: PairLookup, tol: float, mount_t
     stars = star_vec64(verifier.db)
     bases = base_triangles(obs.vec, obs.camera, obs.by_camera, tol, lookup.max_angle)
     skies = sky_limits(verifier.db)[:1 if len(obs) == 3 else None]  # no room for 4 limits in 3 stars
+    all_stars = sky_limits(verifier.db)[0]  # every star of the database, in its rows (one signature)
     slacks = SLACKS if len(obs) >= 4 else SLACKS[:1]
     n_looks = len(bases) * len(skies) * len(slacks)
     named: dict[int, int] = {}
     for i, j, k in bases[:MAX_BASES]:
         t_k = tol + (mount_tol if obs.camera[k] != obs.camera[i] else 0.0)
         tri = np.array([i, j, k])
-        every = cross_triples(lookup, stars, obs.vec[tri], (tol, t_k, t_k))  # each sky holds a subset
+        every = cross_triples(lookup, all_stars.vec, obs.vec[tri], (tol, t_k, t_k),  # each sky holds a subset
+                              grid=all_stars.grid(THIRD_STAR_REACH_DEG))
         if len(every) == 0 or len(every) > MAX_MATCHES:
             continue
         for sky in skies:
@@ -397,7 +417,7 @@ def _bound(verifier: Verifier, lookup: PairLookup, sky: Sky, v3: FloatArray, mat
         e = TESTS * k_up * h * (delta / w_small) ** 3
         if e * n_looks <= verifier.max_false_prob:
             return e
-    box = cross_triples(lookup, stars, v3, (w, w, w), sky.index)
+    box = cross_triples(lookup, stars, v3, (w, w, w), sky.index, sky.grid(THIRD_STAR_REACH_DEG))
     if len(box) < BOX_TARGET / 2 and w < w_max:
         w = min(w * (BOX_TARGET / max(len(box), 8)) ** (1 / 3), w_max, BOX_MAX * tol)
         box = None
@@ -412,7 +432,7 @@ def _box_bound(verifier: Verifier, lookup: PairLookup, sky: Sky, v3: FloatArray,
     sampled box."""
     stars = sky.vec
     if box is None:
-        box = cross_triples(lookup, stars, v3, (w, w, w), sky.index)
+        box = cross_triples(lookup, stars, v3, (w, w, w), sky.index, sky.grid(THIRD_STAR_REACH_DEG))
     box = box[~np.all(box == match, axis=1)]  # the background around the match, without it
     thin = 1.0
     if len(box) > SPARSE_MAX_SAMPLE:  # a random thinning of a Poisson count is Poisson

@@ -94,6 +94,12 @@ frames = simulate_frames(p.camera, 400, SimConfig(mag_limit=p.mag_limit, centroi
 options = SolveOptions(centroid_sigma_px=1.0)
 for f in [f for f in frames if 3 <= len(f.centroids.xy) <= 4][:40]:
     solve(f.centroids, p.camera, db, options=options)
+from service.core.pipeline import solve_rig
+from service.core.sim_rig import gf7_rig, simulate_rig_frames
+rig = gf7_rig()
+rig_frames = simulate_rig_frames(rig, 300, SimConfig(mag_limit=5.5, centroid_noise_px=0.5), rng=3)
+for rf in [rf for rf in rig_frames if 3 <= sum(len(f.hip) for f in rf.frames) <= 5][:12]:
+    solve_rig(rf.inputs(rig), db, options=SolveOptions(centroid_sigma_px=0.5))
 after = loaded()
 print(json.dumps({k: v for k, v in after.items() if v > before.get(k, 0)}))
 """
@@ -104,8 +110,10 @@ def test_a_fresh_worker_loads_no_kernel_on_its_first_sparse_frames(default_set_d
     3-4-star frames to load: the unique-triangle proof's pairing (``match._match_rig``) and the
     small frame's wide screen (``screen.hits_under``) are called from Python, where a compiled
     caller's cached copy does not serve them; loaded on first use they cost a worker's first
-    such frames 5-9 ms each. (In the test session's own process other tests load them first,
-    so only a fresh process shows it.)"""
+    such frames 5-9 ms each. Nor for a rig's sparse frames: the rig proof's third-star lookup
+    (``_rig_third.third_star_candidates``), which the warm-up's own rig frames need not reach.
+    (In the test session's own process other tests load them first, so only a fresh process
+    shows it.)"""
     import json
     import os
     import subprocess

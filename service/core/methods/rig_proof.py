@@ -245,7 +245,9 @@ def sky_limits(db: NavDatabase) -> list[Sky]:
                 continue
             index = np.full(len(mag), -1, np.int64)
             index[keep] = np.arange(int(keep.sum()))
-            skies.append(Sky(float(db.mag_limit) - step, np.ascontiguousarray(vec[keep]), index, {}))
+            sky_vec = np.ascontiguousarray(vec[keep])
+            sky_vec.flags.writeable = False  # as star_vec64's: the kernels' one signature for both
+            skies.append(Sky(float(db.mag_limit) - step, sky_vec, index, {}))
         cache["rig_skies"] = skies
     return cache["rig_skies"]
 
@@ -315,7 +317,7 @@ def prove_sparse_rig(verifier: Verifier, lookup: PairLookup, tol: float, mount_t
     stars = star_vec64(verifier.db)
     bases = base_triangles(obs.vec, obs.camera, obs.by_camera, tol, lookup.max_angle)
     skies = sky_limits(verifier.db)[:1 if len(obs) == 3 else None]  # no room for 4 limits in 3 stars
-    all_stars = sky_limits(verifier.db)[0]  # every star of the database, in its rows (one signature)
+    all_stars = sky_limits(verifier.db)[0]  # every star of the database, in its rows
     slacks = SLACKS if len(obs) >= 4 else SLACKS[:1]
     n_looks = len(bases) * len(skies) * len(slacks)
     named: dict[int, int] = {}

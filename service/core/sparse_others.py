@@ -35,7 +35,8 @@ from .verify import Verified, Verifier
 SPARSE_CONFIDENCE = 0.95
 """Confidence of the Poisson upper bound on the density of catalogue triangles (this test's and the
 full proof's, :mod:`service.core.sparse_proof`)."""
-_K_UP_NONE = float(gammaincinv(1, SPARSE_CONFIDENCE))
+K_UP_EMPTY = float(gammaincinv(1, SPARSE_CONFIDENCE))
+"""The Poisson upper bound at ``SPARSE_CONFIDENCE`` on a count of none (3.0)."""
 TESTS = 2
 """Tests a unique triangle may pass (this one, then the full proof): the factor on this one's bound."""
 BOX_ROOM = 8.0
@@ -47,7 +48,8 @@ BOX_MAX_EPS = 12.0
 def prove_with_others(verifier: Verifier, r: FloatArray, obs_idx: IntArray, cat_idx: IntArray, delta: float,
                       n_looks: int, unique_within_rad: float,
                       sample_box: Callable[[float], IntArray] | None = None,
-                      max_width_rad: float = math.inf) -> Verified | None:
+                      max_width_rad: float = math.inf,
+                      pairing: tuple[IntArray, IntArray, float] | None = None) -> Verified | None:
     """The triangle ``obs_idx -> cat_idx`` (attitude ``r``, ICRS -> body; largest side mismatch
     ``delta``, rad) proven with the frame's other stars, or None (the full proof may still).
 
@@ -61,11 +63,13 @@ def prove_with_others(verifier: Verifier, r: FloatArray, obs_idx: IntArray, cat_
         the match among them. None: only the caller's box is used.
     max_width_rad : float
         The widest box read (the full proof's limit: a quarter of the shortest side).
+    pairing : (obs rows, catalogue rows, p), optional
+        ``verifier._match_all(r)``, if the caller has it.
     """
     obs = verifier.obs
     if not 0 < delta <= unique_within_rad:
         return None
-    m_obs, m_cat, p_single = verifier._match_all(r)
+    m_obs, m_cat, p_single = verifier._match_all(r) if pairing is None else pairing
     mine = set(np.asarray(obs_idx).tolist())
     if not mine <= set(m_obs.tolist()):
         return None
@@ -76,9 +80,9 @@ def prove_with_others(verifier: Verifier, r: FloatArray, obs_idx: IntArray, cat_
     tail = float(betainc(n_extra, n_free - n_extra + 1, min(float(p_single), 1.0)))
     factor = TESTS * max(n_looks, 1) * tail
     limit = verifier.max_false_prob
-    prob = factor * _K_UP_NONE * (delta / unique_within_rad) ** 3
+    prob = factor * K_UP_EMPTY * (delta / unique_within_rad) ** 3
     if prob > limit and sample_box is not None:
-        width = delta * (BOX_ROOM * factor * _K_UP_NONE / limit) ** (1 / 3)
+        width = delta * (BOX_ROOM * factor * K_UP_EMPTY / limit) ** (1 / 3)
         width = min(width, BOX_MAX_EPS * unique_within_rad, max_width_rad)
         if width > unique_within_rad:
             box = np.asarray(sample_box(width), dtype=np.int64).reshape(-1, 3)
@@ -90,4 +94,4 @@ def prove_with_others(verifier: Verifier, r: FloatArray, obs_idx: IntArray, cat_
     return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), min(prob, 1.0), max(n_looks, 1))
 
 
-__all__ = ["prove_with_others"]
+__all__ = ["K_UP_EMPTY", "SPARSE_CONFIDENCE", "TESTS", "prove_with_others"]

@@ -27,15 +27,13 @@ from .navdb.reader import NavDatabase
 from .screen import frame_columns
 from .skygrid import collect_within, has_star_within_away, star_qualifies
 from .skymask import may_hold_star
-from .sparse_others import SPARSE_CONFIDENCE, prove_with_others
+from .sparse_others import K_UP_EMPTY, SPARSE_CONFIDENCE, prove_with_others
 from .star_index import field_grid, sky_grid, sky_mask, star_neighbours, star_vec64
 from .types import Centroids, FloatArray, IntArray
 from .verify import Verified, Verifier
 
 SPARSE_MAX_SAMPLE = 3000
 """At most this many catalogue triples of the density box are projected (a random sample)."""
-_K_UP_NONE = float(gammaincinv(1, SPARSE_CONFIDENCE))
-"""The Poisson upper bound at ``SPARSE_CONFIDENCE`` when no box triple is consistent (k = 0)."""
 
 
 def check_unique_triangle(
@@ -93,15 +91,17 @@ def check_unique_triangle(
     if unseen[0] > 0:
         return None
     looks = max(n_looks, 1)
+    pairing = None
     if explained[0] > 0 and unique_within_rad is not None:
+        pairing = verifier._match_all(r)  # kept for the full proof below
         found = prove_with_others(verifier, r, obs_idx, cat_idx, delta, looks, unique_within_rad, sample_box,
-                                  max_width_rad)
+                                  max_width_rad, pairing)
         if found is not None:
             return found
 
     def worth(width: float, thin: float = 1.0) -> bool:
         """Could a box of half-width ``width`` (rad) prove the match? Its best case, k = 0."""
-        return thin * _K_UP_NONE * (delta / width) ** 3 * looks <= verifier.max_false_prob
+        return thin * K_UP_EMPTY * (delta / width) ** 3 * looks <= verifier.max_false_prob
 
     got = density_box(worth)
     if got is None:
@@ -137,7 +137,7 @@ def check_unique_triangle(
         return None
     # the pairing last: it decides nothing the steps above read (~28 us, and it refused none of
     # seed 002's 1,104 unique triangles whose field held no unseen star, session 30)
-    m_obs, m_cat, _ = verifier._match_all(r)
+    m_obs, m_cat, _ = verifier._match_all(r) if pairing is None else pairing
     if not set(obs_idx.tolist()) <= set(m_obs.tolist()):  # every star of the triangle paired
         return None
     return Verified(m_obs, m_cat, wahba_svd(obs.vec[m_obs], stars[m_cat]), prob, looks)

@@ -60,6 +60,7 @@ from ..geometry import angle_between, pairwise_angles
 from ..match import _camera_rows
 from ..navdb.reader import NavDatabase
 from ..skygrid import SkyGrid, build_sky_grid
+from ..sparse_others import K_UP_EMPTY, TESTS
 from ..sparse_proof import SPARSE_CONFIDENCE, SPARSE_MAX_SAMPLE, field_check_kernel
 from ..star_index import FIELD_CELL_DEG, star_vec64
 from ..types import FloatArray, IntArray
@@ -78,9 +79,6 @@ BOX_START, BOX_MAX, BOX_TARGET = 12.0, 160.0, 2000
 triples aimed at (as ``triangle``'s); ``W`` stays below a quarter of the base pair's side."""
 SMALL_BOX_ROOM = 8.0
 """The first box is as narrow as an empty count proving the match this many times over allows."""
-TESTS = 2
-"""Tests a match's bound may take (the narrow box, then the usual one): the factor on the first."""
-_K_UP_NONE = float(gammaincinv(1, SPARSE_CONFIDENCE))
 LIMIT_STEPS = (0.0, 0.5, 1.0, 1.5)
 """Magnitude limits tried, below the database's faintest star (every one counts in ``n_looks``)."""
 THIRD_STAR_REACH_DEG = 1.0
@@ -316,8 +314,9 @@ def prove_sparse_rig(verifier: Verifier, lookup: PairLookup, tol: float, mount_t
         return None
     stars = star_vec64(verifier.db)
     bases = base_triangles(obs.vec, obs.camera, obs.by_camera, tol, lookup.max_angle)
-    skies = sky_limits(verifier.db)[:1 if len(obs) == 3 else None]  # no room for 4 limits in 3 stars
-    all_stars = sky_limits(verifier.db)[0]  # every star of the database, in its rows
+    limits = sky_limits(verifier.db)
+    skies = limits[:1 if len(obs) == 3 else None]  # no room for 4 limits in 3 stars
+    all_stars = limits[0]  # every star of the database, in its rows
     slacks = SLACKS if len(obs) >= 4 else SLACKS[:1]
     n_looks = len(bases) * len(skies) * len(slacks)
     named: dict[int, int] = {}
@@ -406,13 +405,13 @@ def _bound(verifier: Verifier, lookup: PairLookup, sky: Sky, v3: FloatArray, mat
     empty count would prove the match with ``SMALL_BOX_ROOM`` to spare (for ``n_looks`` looks)
     is read first, where it is narrower than the usual first box: a few triples instead of
     ~2,000. If it proves the match its ``E`` is returned with a factor of ``TESTS`` (two tests
-    may be made); otherwise the box grows as before."""
+    may be made, as in :mod:`~..sparse_others`); otherwise the box grows as before."""
     stars = sky.vec
     delta = float(np.max(np.abs(pairwise_angles(v3) - pairwise_angles(stars[match]))))
     w_max = float(angle_between(v3[0], v3[1])) / 4
     h = free_weight(verifier, m, slack)
     w = min(BOX_START * tol, w_max)
-    room = SMALL_BOX_ROOM * TESTS * _K_UP_NONE * h * max(n_looks, 1) / verifier.max_false_prob
+    room = SMALL_BOX_ROOM * TESTS * K_UP_EMPTY * h * max(n_looks, 1) / verifier.max_false_prob
     w_small = delta * room ** (1 / 3)
     if 0 < w_small < w:
         k_up = _box_bound(verifier, lookup, sky, v3, match, m, slack, w_small)

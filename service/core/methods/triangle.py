@@ -273,12 +273,11 @@ class TriangleMatcher:
             if best is not None and _names(best, idx, cat):
                 continue
             v = obs_vec[idx]
-            d = pairwise_angles(v)
             found = check_unique_triangle(ctx.verifier, idx, cat, n_looks=n_looks,
                                           density_box=functools.partial(self._density_box, v, eps),
                                           unique_within_rad=eps,
                                           sample_box=functools.partial(self.box_triples, v),
-                                          max_width_rad=min(d[0, 1], d[0, 2], d[1, 2]) / 4)
+                                          max_width_rad=_widest_box(v))
             if found is None:
                 continue
             if best is not None and not np.array_equal(np.sort(best.cat), np.sort(found.cat)):
@@ -295,8 +294,7 @@ class TriangleMatcher:
         triples it examines), but stays below a quarter of the shortest side, so that the
         density is smooth across the box. None, without gathering, where ``worth(W)`` says no
         box that wide could prove the match (see ``check_unique_triangle``)."""
-        d = pairwise_angles(v)
-        w_max = min(d[0, 1], d[0, 2], d[1, 2]) / 4
+        w_max = _widest_box(v)
         if not worth(min(w_max, max(BOX_START, BOX_MAX) * eps)):
             return None  # not even the widest box this triangle allows
         w = min(BOX_START * eps, w_max)
@@ -307,6 +305,13 @@ class TriangleMatcher:
                 return None
             box = self.box_triples(v, w)
         return box, w
+
+
+def _widest_box(v: np.ndarray) -> float:
+    """The widest density box (half-width, rad) of the observed triangle ``v`` (3, 3): a quarter
+    of its shortest side, so that the density is smooth across the box."""
+    d = pairwise_angles(v)
+    return float(min(d[0, 1], d[0, 2], d[1, 2])) / 4
 
 
 def _names(v: Verified, obs_idx: np.ndarray, cat_idx: np.ndarray) -> bool:

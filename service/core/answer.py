@@ -6,7 +6,8 @@ name the blobs of close doubles as their dominant star (:func:`~service.core.ble
 and drop the pairs whose observed star is far too bright for its catalogue star
 (:func:`~service.core.photometry.too_bright_kernel`; the faintest of the pairs the other checks
 keep: :func:`~service.core.photometry.faintest_inverted_among_kernel`), whose catalogue star is fainter than the
-frame's completeness (:func:`~service.core.photometry.completeness_kernel`) or that lie too far
+frame's completeness (:func:`~service.core.photometry.completeness_kernel`; the faintest pair past unseen
+stars: :func:`~service.core.photometry.faintest_past_missed_kernel`) or that lie too far
 from their catalogue star for the frame's noise (:func:`~service.core.residuals.distant_kernel`). The same kernels as
 the Python path, without its k-d tree query and its per-camera numpy calls (rigs keep the Python
 path).
@@ -32,6 +33,7 @@ from .photometry import (
     THRESHOLD_MAG,
     completeness_kernel,
     faintest_inverted_among_kernel,
+    faintest_past_missed_kernel,
     too_bright_kernel,
 )
 from .residuals import distant_kernel
@@ -180,11 +182,13 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
     bad |= hidden_kernel(m_cat, d, pair_mag, hidden_sep, hidden_limits, 1.0 / cam[0], CROWD * radius_px)  # left out
     if has_flux:
         bad |= too_bright_kernel(flux[m_obs], pair_mag, THRESHOLD_MAG, _MIN_PAIRS)
+    field = np.unique(rows)
+    field_paired = _member(field, m_cat)
     if len(pair_mag) >= 3 and pair_mag.max() > median(pair_mag) + FAINT_GATE_MAG:
-        field = np.unique(rows)
-        bad |= completeness_kernel(pair_mag, star_mag[field], _member(field, m_cat))
-    if has_flux:  # last: the faintest pair against the pairs the others keep
+        bad |= completeness_kernel(pair_mag, star_mag[field], field_paired)
+    if has_flux:  # then the faintest pair against the pairs the others keep
         bad |= faintest_inverted_among_kernel(flux[m_obs], pair_mag, bad)
+    bad |= faintest_past_missed_kernel(pair_mag, star_mag[field], field_paired, bad)
     if bad.any():
         m_obs, m_cat = m_obs[~bad], m_cat[~bad]
         moved = True

@@ -22,7 +22,13 @@ from .blends import dominant_pairs
 from .hidden import hidden_kernel, hidden_neighbours
 from .match import CROWD
 from .navdb.reader import NavDatabase
-from .photometry import FAINT_GATE_MAG, beyond_completeness, faintest_inverted_among, too_bright
+from .photometry import (
+    FAINT_GATE_MAG,
+    beyond_completeness,
+    faintest_inverted_among,
+    faintest_past_missed,
+    too_bright,
+)
 from .residuals import distant_pairs
 from .solution import answer
 from .star_index import star_tree
@@ -52,7 +58,8 @@ FieldStars = list[tuple[np.ndarray, np.ndarray]]
 def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: FieldStars, radius_px: float,
                        sigma_px: float = 0.0) -> np.ndarray:
     """Pairs whose observed star is far brighter than its catalogue star, whose catalogue star
-    is fainter than the frame's completeness (see :mod:`service.core.photometry`), that lie
+    is fainter than the frame's completeness or past unseen stars (see
+    :mod:`service.core.photometry`), that lie
     too far from it for the frame's noise (:mod:`service.core.residuals`), or near a star the
     member left out (:mod:`service.core.hidden`)."""
     pair_mag = np.asarray(db.stars.mag[v.cat], dtype=np.float64)
@@ -69,12 +76,13 @@ def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: Fi
                                    CROWD * radius_px)
     if obs.flux is not None:
         bad |= too_bright(obs.flux[v.obs], pair_mag)
+    rows = np.unique(np.concatenate([r for r, _ in field])) if field else np.zeros(0, np.int64)
+    field_paired = _member(rows, v.cat)
     if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
-        rows = np.unique(np.concatenate([r for r, _ in field])) if field else np.zeros(0, np.int64)
-        bad |= beyond_completeness(pair_mag, db.stars.mag[rows], _member(rows, v.cat))
-    if obs.flux is not None:  # last: the faintest pair against the pairs the others keep
+        bad |= beyond_completeness(pair_mag, db.stars.mag[rows], field_paired)
+    if obs.flux is not None:  # then the faintest pair against the pairs the others keep
         bad |= faintest_inverted_among(obs.flux[v.obs], pair_mag, bad)
-    return bad
+    return bad | faintest_past_missed(pair_mag, db.stars.mag[rows], field_paired, bad)
 
 
 def _member(rows: np.ndarray, of: np.ndarray) -> np.ndarray:

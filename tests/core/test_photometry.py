@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from service.core.photometry import beyond_completeness, faintest_inverted, faintest_inverted_among, too_bright
+from service.core.photometry import (
+    beyond_completeness,
+    faintest_inverted,
+    faintest_inverted_among,
+    faintest_past_missed,
+    too_bright,
+)
 
 
 def test_too_bright_flags_a_false_star_on_a_faint_catalogue_star() -> None:
@@ -88,3 +94,58 @@ def test_faintest_inverted_among_weighs_the_pairs_the_other_checks_keep() -> Non
     dropped[-1] = True
     assert np.flatnonzero(faintest_inverted_among(flux_b, mag_b, dropped)).tolist() == [17]
     assert not faintest_inverted_among(flux_b, mag_b, np.zeros(len(mag_b), bool)).any()
+
+
+def _model_field(rng: np.random.Generator, n_bright: int, width_mag: float) -> tuple[np.ndarray, np.ndarray]:
+    """Catalogue magnitudes of a field to 7 Mv (counts grow 10^0.45 a magnitude, ``n_bright``
+    brighter than 6.0 on average) and which of them a camera limited at 6.0 detects (a step, or a
+    logistic of ``width_mag``)."""
+    mag = 7.0 - rng.exponential(1 / (0.45 * np.log(10)), rng.poisson(n_bright * 10 ** 0.45))
+    p = (mag <= 6.0).astype(float) if width_mag == 0 else 1 / (1 + np.exp((mag - 6.0) / width_mag))
+    return mag, rng.random(len(mag)) < p
+
+
+def test_faintest_past_missed_refuses_a_false_pair_past_a_sharp_limit() -> None:
+    rng = np.random.default_rng(5)
+    refused_real = caught = tried = 0
+    for _ in range(500):
+        mag, seen = _model_field(rng, 25, 0.0)
+        if seen.sum() < 6:
+            continue
+        refused_real += int(faintest_past_missed(mag[seen], mag, seen, np.zeros(seen.sum(), bool)).any())
+        past = np.flatnonzero(~seen & (mag > 6.1) & (mag < 6.5))  # a false star falls near one of these
+        if len(past):
+            with_false = seen.copy()
+            with_false[rng.choice(past)] = True
+            got = faintest_past_missed(mag[with_false], mag, with_false, np.zeros(with_false.sum(), bool))
+            caught += int(got[np.argmax(mag[with_false])])
+            tried += 1
+    assert refused_real == 0
+    assert caught / tried > 0.8
+
+
+def test_faintest_past_missed_spares_a_soft_limit() -> None:
+    """Where detection fades over a few tenths of a magnitude, the faintest real star sits past
+    unseen stars as a false one would: the test stands aside."""
+    rng = np.random.default_rng(6)
+    refused = 0
+    for _ in range(500):
+        mag, seen = _model_field(rng, 40, 0.25)
+        refused += int(faintest_past_missed(mag[seen], mag, seen, np.zeros(seen.sum(), bool)).any())
+    assert refused / 500 < 0.03
+
+
+def test_faintest_past_missed_weighs_the_pairs_the_other_checks_keep() -> None:
+    field = np.array([5.0, 5.5, 5.8, 5.9, 6.0, 6.1, 6.15, 6.2, 6.3])
+    paired = np.array([True, True, True, True, True, False, False, False, True])
+    pair_mag = np.array([5.5, 5.8, 5.9, 6.0, 6.3])
+    assert not faintest_past_missed(pair_mag, field, paired, np.zeros(5, bool)).any()  # 5 pairs: too few
+    pair_mag = np.append(pair_mag, 5.0)
+    assert np.flatnonzero(faintest_past_missed(pair_mag, field, paired, np.zeros(6, bool))).tolist() == [4]
+    dropped = np.zeros(6, bool)
+    dropped[0] = True  # the 5.5-Mv pair dropped by another check: 5 kept, too few
+    assert not faintest_past_missed(pair_mag, field, paired, dropped).any()
+    soft = paired.copy()
+    soft[[2, 3]] = False  # 5.8 and 5.9 unseen: 1 of the 3 stars 0.3 mag below 6.0 paired, no sharp limit
+    assert not faintest_past_missed(pair_mag[[0, 3, 4, 5]].tolist() + [4.0, 4.5], np.append(field, [4.0, 4.5]),
+                                    np.append(soft, [True, True]), np.zeros(6, bool)).any()

@@ -230,7 +230,7 @@ def faintest_past_missed(pair_mag: FloatArray, field_mag: FloatArray, field_pair
     tenths of a magnitude (colour, vignetting, noise), the faintest real star sits past unseen
     stars as often as a false one does: in a model field of 25-60 stars whose detection falls as a
     logistic of width 0.1-0.3 mag, the test without this gate refused the real faintest star in
-    50-90 % of frames; with it 0-10 %, and it then refuses next to no false pair either, which the
+    50-90 % of frames; with it 0-11 % (``/work/s33/soft.py``), and it then refuses next to no false pair either, which the
     magnitudes cannot tell apart there. At least ``MIN_PAIRS`` kept pairs. Compiled:
     :func:`faintest_past_missed_kernel`.
     """

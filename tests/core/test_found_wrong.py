@@ -64,7 +64,7 @@ FOUND = [
     # pairs, under the 40% that refuses it, but one of the 18 (4.8 Mv) was dropped by another check
     # in the same pass, which left the answer's faintest pair outshining 7 of 17.
     ("seed003", 2.0, 5, 0.0, 10667285709216991066, 833, 414),
-    # session 32, the known wrong answers of sessions 10 and 30 below; service/core/photometry.py
+    # session 32, known wrong answers of sessions 10 and 30 until then; service/core/photometry.py
     # (faintest_past_missed). The faintest pair's catalogue star lay past 2-24 of the field's stars
     # that went unseen between it and the next-faintest pair, in a frame whose stars show a sharp
     # limit: 13 false stars named after a star past the camera's limit, and a real star named after

@@ -145,7 +145,9 @@ def test_faintest_past_missed_weighs_the_pairs_the_other_checks_keep() -> None:
     dropped = np.zeros(6, bool)
     dropped[0] = True  # the 5.5-Mv pair dropped by another check: 5 kept, too few
     assert not faintest_past_missed(pair_mag, field, paired, dropped).any()
-    soft = paired.copy()
-    soft[[2, 3]] = False  # 5.8 and 5.9 unseen: 1 of the 3 stars 0.3 mag below 6.0 paired, no sharp limit
-    assert not faintest_past_missed(pair_mag[[0, 3, 4, 5]].tolist() + [4.0, 4.5], np.append(field, [4.0, 4.5]),
-                                    np.append(soft, [True, True]), np.zeros(6, bool)).any()
+    # 5.8 and 5.9 unseen: 1 of the 3 stars in the 0.3 mag below 6.0 paired, no sharp limit
+    soft_field = np.append(field, [4.0, 4.5])
+    soft_paired = np.append(paired, [True, True])
+    soft_paired[[2, 3]] = False
+    soft_pairs = np.array([5.5, 6.0, 6.3, 5.0, 4.0, 4.5])
+    assert not faintest_past_missed(soft_pairs, soft_field, soft_paired, np.zeros(6, bool)).any()

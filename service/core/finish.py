@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .answer import compiled_checks, pair_distances
+from .answer import compiled_checks, pair_distances, repaired
 from .apparent import aberrate, apparent_directions
-from .attitude import estimate
+from .attitude import ARCSEC_PER_RAD, estimate
 from .blends import dominant_pairs
 from .hidden import hidden_kernel, hidden_neighbours
 from .match import CROWD
@@ -158,7 +158,8 @@ def solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_
     """The answer of the verified identification ``v`` (found by ``method``; ``sigma_rad`` the
     declared centroid error): a fit pulled off by a few wrong pairs trimmed, the pairs checked
     (:func:`checked_pairs`, compiled for one camera), the catalogue's directions made apparent
-    (epoch, aberration) and the attitude fitted to them."""
+    (epoch, aberration) and the attitude fitted to them; a one-camera answer with a pair past the
+    match radius under that fit is paired again from it (:func:`~.answer.repaired`)."""
     moved = options.epoch is not None or options.observer_velocity_km_s is not None
     radius = options.match_radius_px or max(2.5, 3.0 * sigma_rad / obs.pixel_scale_rad)
     sigma_px = sigma_rad / obs.pixel_scale_rad
@@ -175,5 +176,12 @@ def solution(obs: Observation, db: NavDatabase, v: Verified, method: str, sigma_
     moved = moved or changed
     ref, seen = apparent(db, v.cat, options)
     fit = estimate(obs.vec[v.obs], seen, matrix=None if moved else v.matrix, prior_sigma_rad=sigma_rad)
+    if len(v.obs) >= 3 and np.max(fit.residuals_arcsec) > radius * obs.pixel_scale_rad * ARCSEC_PER_RAD:
+        # a pair past the match radius under the final fit: paired again from it (answer.repair_kernel)
+        again = repaired(obs, db, v.obs, v.cat, fit.matrix, radius, sigma_px)
+        if again is not None:
+            v = Verified(again[0], again[1], fit.matrix, v.false_prob, v.n_trials)
+            ref, seen = apparent(db, v.cat, options)
+            fit = estimate(obs.vec[v.obs], seen, prior_sigma_rad=sigma_rad)
     return answer(obs, db, v.obs, v.cat, ref, fit.matrix, fit.residuals_arcsec, fit.rms_arcsec, fit.sigma_arcsec,
                    v.false_prob, method)

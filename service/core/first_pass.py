@@ -15,7 +15,8 @@ Python between them run in one (:func:`first_pass_kernel`):
 3. the answer's checks: close doubles named, implausible pairs dropped
    (:func:`~.answer.answer_kernel`);
 4. the final fit: Wahba refit if the pairs changed, residuals, RMS and the pooled 1-sigma
-   (:func:`~.attitude.estimate`).
+   (:func:`~.attitude.estimate`); where a pair lies past the match radius under it, the stars
+   paired again from it and checked again (:func:`~.answer.repair_kernel`), and fitted again.
 
 Python converts the input (:func:`~service.core.pipeline._observation`) and builds the answer;
 for a camera whose set-up is kept (:mod:`~service.core.camera_setup`) the call takes the
@@ -38,8 +39,8 @@ import numpy as np
 from numba import njit
 
 from ._entry import EntryCall, plain, sole_entry
-from .answer import FIELD_MARGIN_DEG, answer_kernel, star_mags
-from .attitude import PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
+from .answer import FIELD_MARGIN_DEG, answer_kernel, repair_kernel, star_mags
+from .attitude import ARCSEC_PER_RAD, PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
 from .camera import brightest_first
 from .check_kernel import RECHECK_REACH, could_pair_more, recheck_pairs
 from .hidden import hidden_neighbours
@@ -414,6 +415,16 @@ def settle_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row
     if moved:
         r = wahba_kernel(o, ref, np.ones(len(m_obs)))
     res, rms, sd = _fit_stats(o, ref, r, -1.0)
+    if len(m_obs) >= 3 and res.max() > answer_radius * pixel_scale * ARCSEC_PER_RAD:
+        # a pair past the match radius under the final fit: paired again from it (answer.repair_kernel)
+        m_obs, m_cat, grew = repair_kernel(obs_vec, obs_xy, flux, has_flux, m_obs, m_cat, r, vec, mags, cell, side,
+                                           keys, starts, stars, columns, field_chord, mounts, cams, dist, rows,
+                                           row_off, radius_px, answer_radius, sigma_px, hid, hid_lim)
+        if grew:
+            o = obs_vec[m_obs]
+            ref = vec[m_cat]
+            r = wahba_kernel(o, ref, np.ones(len(m_obs)))
+            res, rms, sd = _fit_stats(o, ref, r, -1.0)
     sd = pooled_sigma(res, sd, sigma_rad, prior_dof)
     a_ints, a_floats = answer_columns(r, ref, obs_index[m_obs], m_cat, mags, d_hip if used_deep else hip, res)
     n = len(m_obs)

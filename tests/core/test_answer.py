@@ -1,11 +1,12 @@
-"""The compiled answer checks (one camera) give what the pipeline's Python checks give."""
+"""The compiled answer checks (one camera) give what the pipeline's Python checks give, and an
+answer whose fit left stars out is paired again from it."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from service.core.answer import compiled_checks, recheck
+from service.core.answer import compiled_checks, recheck, repaired
 from service.core.finish import checked_pairs
 from service.core.navdb import NavDatabase
 from service.core.pipeline import _observation
@@ -71,3 +72,36 @@ def test_compiled_recheck_gives_the_verifiers_answer(seed000_db: NavDatabase) ->
         proven += ok
         refused += not ok
     assert proven >= 10 and refused >= 3
+
+
+def test_repaired_pairs_again_the_stars_a_pulled_fit_left_out(seed000_db: NavDatabase) -> None:
+    """From half an answer's pairs under an attitude pulled 3 px at the image's corners (a roll
+    about the boresight), the pairing is grown again to the whole checked answer (one star
+    short at most), every star right; an answer that pairs every star it can is left as it is
+    (None)."""
+    config = SimConfig(mag_limit=6.5, centroid_noise_px=0.5, false_stars=2)
+    frames = simulate_frames(SEED000_CAMERA, 20, config, rng=11)
+    corner_px = float(np.hypot(SEED000_CAMERA.width, SEED000_CAMERA.height)) / 2
+    a = 3.0 / corner_px  # radians: 3 px at the corners
+    roll = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    row_of = {int(h): i for i, h in enumerate(np.asarray(seed000_db.stars.hip))}
+    kept: list[float] = []
+    for frame in frames:
+        obs = _observation([(frame.centroids, SEED000_CAMERA, None)], [np.eye(3)])
+        hip = frame.hip[obs.index]
+        known = [(i, row_of[int(h)]) for i, h in enumerate(hip) if h >= 0 and int(h) in row_of][:4]
+        if len(known) < 4:
+            continue
+        v = Verifier(seed000_db, obs, match_radius_px=3.0).check(*map(np.array, zip(*known, strict=True)))
+        if v is None or len(v.obs) < 10:
+            continue
+        assert repaired(obs, seed000_db, v.obs, v.cat, v.matrix, 3.0) is None
+        half = len(v.obs) // 2
+        again = repaired(obs, seed000_db, v.obs[:half], v.cat[:half], roll @ v.matrix, 3.0)
+        assert again is not None
+        o, c = again
+        checked, _, _ = compiled_checks(obs, seed000_db, v.obs, v.cat, v.matrix, 3.0)  # what the answer keeps
+        assert len(o) > half
+        assert all(int(seed000_db.stars.hip[ci]) == int(hip[oi]) for oi, ci in zip(o.tolist(), c.tolist()))
+        kept.append(len(o) / len(checked))
+    assert len(kept) >= 5 and np.mean(kept) >= 0.9

@@ -83,6 +83,11 @@ FOUND = [
     ("seed003", 2.0, 5, 0.3, 14714239795966869065, 833, 322),
     ("seed003", 2.0, 2, 0.3, 16902623796248992325, 833, 612),
     ("seed003", 2.0, 0, 0.3, 17193331164963438550, 833, 41),
+    # session 33, `--frames 100000 --seed 12`; service/core/answer.py (repair_kernel). The verifier's
+    # pairing was still growing at its last refit: a false star it had paired lay 7 px (220") off its
+    # catalogue star under the final fit, which left 5 of the 14 real stars out; paired again from
+    # that fit, the 14 real stars and no false one.
+    ("seed000", 2.0, 2, 0.3, 4725724889438530113, 833, 785),
 ]
 
 
@@ -120,6 +125,13 @@ KNOWN_WRONG = [
     # 2: a false star named after a catalogue star inside the camera's limit, 3.2 and 4.9 px away.
     ("seed004", 2.0, 5, 0.0, 14512514463542990805, 833, 478),
     ("seed000", 2.0, 5, 0.0, 1583350793573434237, 833, 229),
+    # session 33, `--seed 11`: one more of the kind above on seed 000's camera (0.3 mag of noise): a
+    # false star named after a 7.18-Mv star, 0.7 mag past the next-faintest pair with 20 of the deep
+    # member's stars unseen between, where 6 of the 7 stars in the 0.3 mag below that pair are paired
+    # (86%). In a soft-limit model (`/work/s34/soft.py`: Hipparcos fields of 8-20 deg, a logistic
+    # detection of width 0.05-0.3 mag) a real faintest star lies past 20 unseen stars in up to 62% of
+    # frames, and lowering the gate to 80% doubles how often the real faintest star is refused.
+    ("seed000", 2.0, 2, 0.3, 2358934478751642668, 833, 741),
     # 1: a real star named after its neighbour (265" or 363" away, as two of session 30's three were;
     # 3.7-7 px at these cameras' scales), at 2 px of noise.
     ("seed004", 2.0, 2, 0.3, 10829016878671831359, 833, 168),
@@ -127,7 +139,7 @@ KNOWN_WRONG = [
 
 
 @pytest.mark.xfail(reason="one star misnamed under the right attitude: a false star at the camera's limit or near a "
-                          "faint star, or a close neighbour (sessions 10, 30, 32)")
+                          "faint star, or a close neighbour (sessions 10, 30, 32, 33)")
 @pytest.mark.parametrize("case", KNOWN_WRONG, ids=[f"{c[0]}-{c[1]}px-{c[2]}false-{c[6]}" for c in KNOWN_WRONG])
 def test_known_wrong_answers_at_the_limit(case, default_set_db) -> None:
     test_found_wrong_answers_name_no_false_star(case, default_set_db)

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import service.core.finish as finish
 import service.core.methods.multifov as multifov
+import service.core.pipeline as pipeline
 import service.core.trimmed as trimmed
 from bench.common import scenarios
 from service.core.evaluate import score
@@ -39,10 +41,14 @@ def test_multifov_near_miss_on_one_wide_camera_is_moved_to_the_right_basin(seed0
     sol, s = solved()
     assert s.correct and s.wrong_stars == 0
     assert len(sol.stars) >= 100  # the basin of the right attitude pairs most of the frame
-    monkeypatch.setattr(trimmed, "SUSPECT_SIGMA", float("inf"))  # without the step: the near miss
+    monkeypatch.setattr(trimmed, "SUSPECT_SIGMA", float("inf"))  # without the step
     # (as multifov searched then: one distance triangle a master; with the pairs of its 4 nearest
     # stars it now also finds the right answer through another triangle, the near miss being marginal)
     monkeypatch.setattr(multifov, "NEAR_STARS", 2)
+    sol, s = solved()  # the near miss's pairs lie past the match radius under its fit: paired again
+    assert s.correct and s.wrong_stars == 0  # from it (answer.repair_kernel), it moves to the right basin too
+    monkeypatch.setattr(pipeline, "COMPILED_SETTLE", False)  # without that either: the near miss
+    monkeypatch.setattr(finish, "repaired", lambda *args, **kwargs: None)
     sol, s = solved()
     assert not s.correct and s.wrong_stars == 2 and len(sol.stars) == 16
     monkeypatch.setattr(multifov, "NEAR_STARS", 4)

@@ -88,6 +88,12 @@ FOUND = [
     # catalogue star under the final fit, which left 5 of the 14 real stars out; paired again from
     # that fit, the 14 real stars and no false one.
     ("seed000", 2.0, 2, 0.3, 4725724889438530113, 833, 785),
+    # session 33, known wrong answers of session 30 until then; service/core/match.py (EDGE_CROWDS).
+    # A real star's blob named after its neighbour 3.2-3.7 px away (363" and 265"), because its own
+    # star was predicted a fraction of a pixel outside the image, where the pairing did not see it
+    # crowd the blob.
+    ("seed003", 2.0, 5, 0.0, 6509014638671384810, 833, 631),
+    ("seed004", 2.0, 2, 0.3, 10829016878671831359, 833, 168),
 ]
 
 
@@ -116,25 +122,22 @@ KNOWN_WRONG = [
     ("seed003", 1.0, 2, 0.0, 13904914547839974109, 833, 60),
     ("seed003", 1.0, 5, 0.3, 16392285237062196429, 833, 138),
     ("seed003", 2.0, 5, 0.0, 15795732165694557160, 833, 384),
-    # 3 more past unseen stars (6-13 of them), where fewer than 90% of the field's stars in the 0.3
+    # 2 more past unseen stars (6-13 of them), where fewer than 90% of the field's stars in the 0.3
     # mag below the next-faintest pair are paired: the sharp limit the test asks for is not shown.
-    # 2 false stars, and a real star named after its neighbour (265" or 363" away).
     ("seed003", 2.0, 5, 0.0, 16161300031527355709, 833, 525),
     ("seed003", 2.0, 5, 0.3, 14714239795966869065, 833, 598),
-    ("seed003", 2.0, 5, 0.0, 6509014638671384810, 833, 631),
-    # 2: a false star named after a catalogue star inside the camera's limit, 3.2 and 4.9 px away.
-    ("seed004", 2.0, 5, 0.0, 14512514463542990805, 833, 478),
-    ("seed000", 2.0, 5, 0.0, 1583350793573434237, 833, 229),
-    # session 33, `--seed 11`: one more of the kind above on seed 000's camera (0.3 mag of noise): a
-    # false star named after a 7.18-Mv star, 0.7 mag past the next-faintest pair with 20 of the deep
+    # session 33, `--seed 11`: one more of that kind on seed 000's camera (0.3 mag of noise): a false
+    # star named after a 7.18-Mv star, 0.7 mag past the next-faintest pair with 20 of the deep
     # member's stars unseen between, where 6 of the 7 stars in the 0.3 mag below that pair are paired
     # (86%). In a soft-limit model (`/work/s34/soft.py`: Hipparcos fields of 8-20 deg, a logistic
     # detection of width 0.05-0.3 mag) a real faintest star lies past 20 unseen stars in up to 62% of
     # frames, and lowering the gate to 80% doubles how often the real faintest star is refused.
     ("seed000", 2.0, 2, 0.3, 2358934478751642668, 833, 741),
-    # 1: a real star named after its neighbour (265" or 363" away, as two of session 30's three were;
-    # 3.7-7 px at these cameras' scales), at 2 px of noise.
-    ("seed004", 2.0, 2, 0.3, 10829016878671831359, 833, 168),
+    # 2: a false star named after a catalogue star inside the camera's limit, 3.2 and 4.9 px away. Both
+    # stars lie on the image's edge (predicted 0.2 px inside and 0.4 px outside it): their own blobs
+    # fell outside, and the false star is 2.5 sigma from the prediction, as a real blob may be.
+    ("seed004", 2.0, 5, 0.0, 14512514463542990805, 833, 478),
+    ("seed000", 2.0, 5, 0.0, 1583350793573434237, 833, 229),
 ]
 
 

@@ -218,8 +218,8 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
 
 
 REPAIR_REFITS = np.int64(4)
-"""Refits of the pairing after an answer's checks moved it (``match._refine``'s growth loop, as
-the verifier's check runs it)."""
+"""Refits of :func:`repair_kernel`'s pairing (``match._refine``'s growth loop, as the verifier's
+check runs it)."""
 
 
 @njit(cache=True, nogil=True)

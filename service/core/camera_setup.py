@@ -43,6 +43,9 @@ class CameraSetup:
     deepest: NavDatabase
     static: tuple[Any, ...]
     """:func:`~.first_pass.first_pass_kernel`'s arguments after the frame's own."""
+    packed: Any
+    """``static`` as one :class:`~.packed.Packed`, as :func:`~.first_pass.frame_first_pass_kernel`
+    takes it."""
     probes: np.ndarray
     """The image's centre and corners, body frame (:func:`~.verify.camera_probes`)."""
     arrays: dict[int, RigArrays] = field(default_factory=dict)

@@ -52,6 +52,7 @@ from .methods.maxangle_search import _static_args as maxangle_args
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS
 from .methods.quad_kernel import STATUS_FOUND, quad_search
 from .navdb.reader import NavDatabase
+from .packed import Packed, pack
 from .plan import fallback_next
 from .star_index import field_grid
 from .verify import (
@@ -148,7 +149,7 @@ def fallbacks(obs: Observation, plan: list[tuple[NavDatabase, list[str]]], trial
         float(scale),
         float(max_false_prob), float(Verifier.strong_false_prob), int(Verifier.confirm_patterns),
         int(Verifier.screen_stars), int(Verifier.min_matches), float(cam.width) * float(cam.height),
-        3.0 * radius * scale, MAX_CANDIDATES, CHECKS_PER_CHUNK, QUERY_STARS, MAX_PROBES, MAX_CHECKS, *static)
+        3.0 * radius * scale, MAX_CANDIDATES, CHECKS_PER_CHUNK, QUERY_STARS, MAX_PROBES, MAX_CHECKS, static)
     if status == CHAIN_BACK:
         return None
     names = ("quad", "maxangle")
@@ -165,9 +166,9 @@ SETUP_CACHE_SIZE = 64
 
 def _setup(plan: list[tuple[NavDatabase, list[str]]], cam: Any, radius_px: float, small: bool,
            first_quad_only: bool = False
-           ) -> tuple[list[tuple[NavDatabase, int]], np.ndarray, np.ndarray, tuple[Any, ...]] | None:
+           ) -> tuple[list[tuple[NavDatabase, int]], np.ndarray, np.ndarray, Packed] | None:
     """The passes of ``plan`` (:func:`fallback_passes`) as the kernel takes them: kinds and
-    members, and every member's arrays; kept per plan, frame size class, camera and match radius
+    members, and every member's arrays (one :class:`~.packed.Packed`); kept per plan, frame size class, camera and match radius
     (px) on the first member (every frame of a camera asks the same; building them costs ~5 us)."""
     first = plan[0][0]
     cache = first.__dict__.setdefault("_chain_setup", {})
@@ -185,8 +186,8 @@ def _setup(plan: list[tuple[NavDatabase, list[str]]], cam: Any, radius_px: float
         first_ma = first if "maxangle" in first.tables else second
         second_ma = second if "maxangle" in second.tables else first_ma
         quad_of = second if "quad" in second.tables else first
-        static = (*_quad_args(quad_of, cam), *_maxangle_args(first_ma, cam, radius_px),
-                  *_maxangle_args(second_ma, cam, radius_px))
+        static = pack((*_quad_args(quad_of, cam), *_maxangle_args(first_ma, cam, radius_px),
+                       *_maxangle_args(second_ma, cam, radius_px)))
         setup = (passes, kinds, members, static)
     if len(cache) >= SETUP_CACHE_SIZE:
         cache.clear()
@@ -289,19 +290,32 @@ def _maxangle_pass(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, trials, l
 
 @njit(cache=True, nogil=True)
 def chain_kernel(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, probes, kinds, members, trials, few_trials, n_tri,
-                 tri, tri_ext,
-                 tol, radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns, screen_stars,
-                 min_matches, area, agree_limit, max_candidates, checks_per_chunk, n_use, max_probes, max_checks,
-                 q_patterns, q_table, q_spill, q_ratio_bin, q_edge_bin, q_edge_max, q_star_vec, q_s_cell, q_s_side,
-                 q_s_keys,
-                 q_s_starts, q_s_stars, q_s_columns, q_g_cell, q_g_side, q_g_keys, q_g_starts, q_g_stars, q_g_columns,
-                 q_near_chord,
-                 a_cells, a_key, a_bucket_start, a_tab_x, a_tab_y, a_ids, a_n_buckets, a_b_scale, a_screen_chord,
-                 a_s_cell, a_s_side, a_s_keys, a_s_starts, a_s_stars, a_s_columns, a_mask_n, a_mask_words, a_star_vec,
-                 a_g_cell, a_g_side, a_g_keys, a_g_starts, a_g_stars, a_g_columns, a_near_chord, a_d_max, a_xi,
-                 b_cells, b_key, b_bucket_start, b_tab_x, b_tab_y, b_ids, b_n_buckets, b_b_scale, b_screen_chord,
-                 b_s_cell, b_s_side, b_s_keys, b_s_starts, b_s_stars, b_s_columns, b_mask_n, b_mask_words, b_star_vec,
-                 b_g_cell, b_g_side, b_g_keys, b_g_starts, b_g_stars, b_g_columns, b_near_chord, b_d_max, b_xi):
+                 tri, tri_ext, tol, radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns,
+                 screen_stars, min_matches, area, agree_limit, max_candidates, checks_per_chunk, n_use, max_probes,
+                 max_checks, static):
+    """:func:`_chain` with the members' arrays (``q_*``, ``a_*``, ``b_*``) as one
+    :class:`~.packed.Packed` (``static``; one pointer to hand over, not ~75 arrays)."""
+    return _chain(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, probes, kinds, members, trials, few_trials, n_tri,
+                  tri, tri_ext, tol, radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns,
+                  screen_stars, min_matches, area, agree_limit, max_candidates, checks_per_chunk, n_use, max_probes,
+                  max_checks, *static.args)
+
+
+@njit(cache=True, nogil=True)
+def _chain(obs_vec, obs_xy, mounts, cams, dist, rows, row_off, probes, kinds, members, trials, few_trials, n_tri,
+          tri, tri_ext,
+          tol, radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns, screen_stars,
+          min_matches, area, agree_limit, max_candidates, checks_per_chunk, n_use, max_probes, max_checks,
+          q_patterns, q_table, q_spill, q_ratio_bin, q_edge_bin, q_edge_max, q_star_vec, q_s_cell, q_s_side,
+          q_s_keys,
+          q_s_starts, q_s_stars, q_s_columns, q_g_cell, q_g_side, q_g_keys, q_g_starts, q_g_stars, q_g_columns,
+          q_near_chord,
+          a_cells, a_key, a_bucket_start, a_tab_x, a_tab_y, a_ids, a_n_buckets, a_b_scale, a_screen_chord,
+          a_s_cell, a_s_side, a_s_keys, a_s_starts, a_s_stars, a_s_columns, a_mask_n, a_mask_words, a_star_vec,
+          a_g_cell, a_g_side, a_g_keys, a_g_starts, a_g_stars, a_g_columns, a_near_chord, a_d_max, a_xi,
+          b_cells, b_key, b_bucket_start, b_tab_x, b_tab_y, b_ids, b_n_buckets, b_b_scale, b_screen_chord,
+          b_s_cell, b_s_side, b_s_keys, b_s_starts, b_s_stars, b_s_columns, b_mask_n, b_mask_words, b_star_vec,
+          b_g_cell, b_g_side, b_g_keys, b_g_starts, b_g_stars, b_g_columns, b_near_chord, b_d_max, b_xi):
     """The passes ``kinds`` (:data:`KIND_QUAD`, :data:`KIND_MAXANGLE`) on ``members`` (0: the
     first member, ``a_*``; 1: the other, ``q_*`` and ``b_*``) after ``trials`` hypotheses.
     Returns ``(status, pass, m_obs, m_cat, r, prob, n_trials, trials, ran)``: ``status``

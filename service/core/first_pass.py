@@ -48,6 +48,7 @@ from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
 from .methods.quad_kernel import STATUS_FOUND, STATUS_MARGINAL, pack_search, quad_search
 from .navdb.reader import NavDatabase
+from .packed import Packed, pack
 from .solution import answer_columns, solution_of, star_hips
 from .star_index import field_grid, star_vec64
 from .trimmed import MIN_PAIRS as TRIM_MIN_PAIRS
@@ -152,25 +153,27 @@ def solved_solution(ints: np.ndarray, floats: np.ndarray) -> Solution:
 
 
 @njit(cache=True, nogil=True)
-def frame_first_pass_kernel(xy_in, flux_in, cx, cy, f_px, mounts, cams, dist, rows, row_off, probes, *static):
+def frame_first_pass_kernel(xy_in, flux_in, cx, cy, f_px, mounts, cams, dist, rows, row_off, probes, static):
     """:func:`first_pass_kernel` on a pinhole camera's centroids as given (px, fluxes): the
     stars sorted brightest first and turned into unit vectors here
     (:func:`~.camera.brightest_first`), so a frame the pass proves needs no
-    :class:`~.verify.Observation` (``static``: :func:`_static_args`)."""
+    :class:`~.verify.Observation`. ``static``: :func:`_static_args` as one
+    :class:`~.packed.Packed` (handed over as one pointer, not ~60 arrays)."""
     order, xy, vec, flux = brightest_first(xy_in, flux_in, cx, cy, f_px)
-    return first_pass_kernel(vec, xy, flux, True, mounts, cams, dist, rows, row_off, order, probes, *static)
+    return first_pass_kernel(vec, xy, flux, True, mounts, cams, dist, rows, row_off, order, probes, *static.args)
 
 
 def kernel_entry() -> Any:
-    """:func:`frame_first_pass_kernel`'s compiled entry point, called with the static arguments
-    as one tuple (``entry(xy, flux, cx, cy, f_px, mounts, cams, dist, rows, row_off, probes,
-    static)``), or None unless the kernel holds exactly one compiled signature.
+    """:func:`frame_first_pass_kernel`'s compiled entry point (``entry(xy, flux, cx, cy, f_px,
+    mounts, cams, dist, rows, row_off, probes, packed)``), or None unless the kernel holds
+    exactly one compiled signature.
 
     Asked after a call through the dispatcher: that call's argument types are then the one
     signature's, and the same set-up's later frames (the same static arguments, the centroids as
     C-contiguous float64 arrays of 2 and 1 dimensions) have them too. The entry skips the
-    dispatcher's typing of the ~70 arguments (numba unboxes them, checking each array's dtype but
-    not its dimensions: the caller checks those), 2-9 us a frame (``/work/s27/dispatch.py``).
+    dispatcher's typing of the arguments (numba unboxes them, checking each array's dtype but
+    not its dimensions: the caller checks those), 2-9 us a frame when the static arguments were
+    ~60 of them (``/work/s27/dispatch.py``; they are one :class:`~.packed.Packed` since session 35).
     Kept once taken: iterating the dispatcher's dict of overloads costs ~40 us, a camera's first
     sight's whole Python budget again (each real image is one)."""
     if len(frame_first_pass_kernel.overloads) != 1:
@@ -262,15 +265,32 @@ def _settle_kept(member: NavDatabase, deepest: NavDatabase, key: tuple[Any, ...]
     """:func:`_settle_args` by its key, ``(id(deepest), diagonal deg, pixel scale rad, sigma_px,
     match_radius_px, max_false_prob)``: :func:`_static_args` has made it already (a camera seen
     for the first time computed its field and scale twice, and the key)."""
+    return _settle_entry(member, deepest, key)[1]
+
+
+def _settle_entry(member: NavDatabase, deepest: NavDatabase, key: tuple[Any, ...]) -> list[Any]:
+    """``[deepest, args, packed]`` kept under :func:`_settle_kept`'s key (``packed``: ``args``
+    as one :class:`~.packed.Packed`, None until :func:`_settle_packed` asks)."""
     cache = member.__dict__.setdefault("_settle_args", {})
     got = cache.get(key)
     if got is not None and got[0] is deepest:
-        return got[1]
-    args = _settle_from(member, deepest, _member_arrays(member, deepest), *key[1:])
+        return got
+    got = [deepest, _settle_from(member, deepest, _member_arrays(member, deepest), *key[1:]), None]
     if len(cache) >= STATIC_CACHE_SIZE:
         cache.clear()
-    cache[key] = (deepest, args)
-    return args
+    cache[key] = got
+    return got
+
+
+def _settle_packed(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: float,
+                   match_radius_px: float | None, max_false_prob: float) -> Packed:
+    """:func:`_settle_args` as one :class:`~.packed.Packed` (kept beside them), as
+    :func:`packed_settle_kernel` takes them."""
+    key = (id(deepest), cam.diagonal_fov_deg, cam.pixel_scale_rad, sigma_px, match_radius_px, max_false_prob)
+    got = _settle_entry(member, deepest, key)
+    if got[2] is None:
+        got[2] = pack(got[1])
+    return got[2]
 
 
 def _settle_from(member: NavDatabase, deepest: NavDatabase, arrays: _MemberArrays, diagonal: float, scale: float,
@@ -300,12 +320,15 @@ def settle(obs: Observation, member: NavDatabase, deepest: NavDatabase, found: V
     where the general path must re-examine the fit (``trimmed_basin``)."""
     k = obs.kernel_arrays
     flux = obs.flux if obs.flux is not None else _NO_FLUX
-    call = _SETTLE if plain(obs.vec, obs.xy, flux, obs.index) else settle_kernel  # (_entry)
-    ok, used_deep, ints, floats = call(
-        obs.vec, obs.xy, flux, obs.flux is not None, k.mounts, k.cams, k.dist, k.rows, k.row_off, obs.index,
-        np.array(found.obs, np.int64), np.array(found.cat, np.int64), np.array(found.matrix, np.float64),
-        float(found.false_prob), int(found.n_trials),
-        *_settle_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob))
+    head = (obs.vec, obs.xy, flux, obs.flux is not None, k.mounts, k.cams, k.dist, k.rows, k.row_off, obs.index,
+            np.array(found.obs, np.int64), np.array(found.cat, np.int64), np.array(found.matrix, np.float64),
+            float(found.false_prob), int(found.n_trials))
+    if plain(obs.vec, obs.xy, flux, obs.index):  # the usual types: the entry point (_entry), one pointer to hand over
+        ok, used_deep, ints, floats = _SETTLE(*head, _settle_packed(member, deepest, obs.cameras[0], sigma_px,
+                                                                    match_radius_px, max_false_prob))
+    else:
+        ok, used_deep, ints, floats = settle_kernel(
+            *head, *_settle_args(member, deepest, obs.cameras[0], sigma_px, match_radius_px, max_false_prob))
     if not ok:
         return None
     return _solved(ints, floats, deepest if used_deep else member)
@@ -442,5 +465,13 @@ def settle_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row
     return True, used_deep, ints, floats
 
 
-_SETTLE = EntryCall(settle_kernel)
+@njit(cache=True, nogil=True)
+def packed_settle_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, obs_index, m_obs, m_cat,
+                         r, prob, trials, static):
+    """:func:`settle_kernel` with the arguments from ``star_vec`` on as one :class:`~.packed.Packed`."""
+    return settle_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row_off, obs_index, m_obs, m_cat,
+                         r, prob, trials, *static.args)
+
+
+_SETTLE = EntryCall(packed_settle_kernel)
 """``settle_kernel`` past the dispatcher once its signature is known (:mod:`._entry`)."""

@@ -40,6 +40,7 @@ from .methods.quad import MIN_STARS as QUAD_MIN_STARS
 from .methods.quad import QUERY_STARS
 from .methods.quad_kernel import STATUS_NONE
 from .navdb.reader import NavDatabase, NavDatabaseSet
+from .packed import pack
 from .plan import fallback_next, search_plan
 from .refusal import SPARSE_ADVICE_STARS, no_solution, refusal, sparse_advice
 from .solution import solution_of
@@ -293,11 +294,11 @@ def solve_rig(
             if entry is not None and xy.ndim == 2 and flux.ndim == 1:  # (first_pass.kernel_entry)
                 solved, _, ints, floats = entry(xy, flux, float(cam.cx), float(cam.cy), float(cam.f_px), arrays.mounts,
                                                 arrays.cams, arrays.dist, arrays.rows, arrays.row_off, setup.probes,
-                                                setup.static)
+                                                setup.packed)
             else:
                 solved, _, ints, floats = frame_first_pass_kernel(
                     xy, flux, float(cam.cx), float(cam.cy), float(cam.f_px), arrays.mounts, arrays.cams, arrays.dist,
-                    arrays.rows, arrays.row_off, setup.probes, *setup.static)
+                    arrays.rows, arrays.row_off, setup.probes, setup.packed)
                 setup.entry[0] = kernel_entry()
             t2 = time.perf_counter()
             if solved:
@@ -469,9 +470,10 @@ def _first_sight(db: NavDatabase | NavDatabaseSet, camera: Camera, method: str, 
     if (not COMPILED_FIRST_PASS or camera.distortion or options.epoch is not None
             or options.observer_velocity_km_s is not None or not plan or plan[0][1][:1] != ["quad"]):
         return None
-    setup = CameraSetup(camera, options, method, plan, deepest,
-                        _static_args(plan[0][0], deepest, camera, options.centroid_sigma_px, options.match_radius_px,
-                                     options.max_false_prob), camera_probes(camera, IDENTITY_MOUNTING))
+    static = _static_args(plan[0][0], deepest, camera, options.centroid_sigma_px, options.match_radius_px,
+                          options.max_false_prob)
+    setup = CameraSetup(camera, options, method, plan, deepest, static, pack(static),
+                        camera_probes(camera, IDENTITY_MOUNTING))
     keep_setup(db, setup)
     return setup
 

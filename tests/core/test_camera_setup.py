@@ -84,7 +84,7 @@ def test_the_kept_setups_are_bounded(default_set_db, monkeypatch) -> None:
     cams = [dataclasses.replace(base, f_px=base.f_px * (1 + 1e-6 * k)) for k in range(4)]
     options = SolveOptions()
     for cam in cams:
-        keep_setup(default_set_db, CameraSetup(cam, options, "auto", [], default_set_db, (), None))
+        keep_setup(default_set_db, CameraSetup(cam, options, "auto", [], default_set_db, (), None, None))
     assert len(default_set_db.__dict__["_camera_setups"]) == 1  # cleared when full, then the newest
     assert len(default_set_db.__dict__["_camera_setups_by_value"]) == 1
     assert kept_setup(default_set_db, cams[-1], "auto", options) is not None

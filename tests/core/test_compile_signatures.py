@@ -20,8 +20,8 @@ import sys
 from ..conftest import ROOT
 
 KERNELS = {
-    "service.core.first_pass": ["first_pass_kernel", "settle_kernel", "frame_first_pass_kernel"],
-    "service.core.fallback_pass": ["chain_kernel", "_maxangle_pass"],
+    "service.core.first_pass": ["first_pass_kernel", "settle_kernel", "packed_settle_kernel", "frame_first_pass_kernel"],
+    "service.core.fallback_pass": ["chain_kernel", "_chain", "_maxangle_pass"],
     "service.core.methods.quad_kernel": ["quad_search", "_verify"],
     "service.core.check_kernel": ["verify_pairs", "recheck_pairs", "could_pair_more"],
     "service.core.match": ["_refine", "_match_rig", "_wahba_pairs"],
@@ -68,6 +68,6 @@ def test_the_default_path_compiles_each_kernel_once(default_set_db: object) -> N
         assert len(sigs) <= 1, (name, sigs)
     # called from Python (quad_search no longer is on these frames: since session 18 the
     # fallbacks of a frame of more than QUERY_STARS stars run compiled too, as a small frame's did)
-    for name in ("first_pass_kernel", "settle_kernel", "chain_kernel", "_triangles_extended", "search_chunks",
+    for name in ("first_pass_kernel", "packed_settle_kernel", "chain_kernel", "_triangles_extended", "search_chunks",
                  "frame_first_pass_kernel"):
         assert len(signatures[name]) == 1, (name, signatures[name])

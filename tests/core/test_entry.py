@@ -51,7 +51,7 @@ def test_the_chain_and_the_settle_answer_as_through_the_dispatcher(default_set_d
     assert fallback_pass._CHAIN.entry is not None and first_pass._SETTLE.entry is not None
     assert sum(s.solved and s.method == "maxangle" for s in fast) >= 10
     monkeypatch.setattr(fallback_pass, "_CHAIN", fallback_pass.chain_kernel)
-    monkeypatch.setattr(first_pass, "_SETTLE", first_pass.settle_kernel)
+    monkeypatch.setattr(first_pass, "_SETTLE", first_pass.packed_settle_kernel)
     slow = [solve(c, p.camera, default_set_db, options=opts) for c in frames]
     for a, b in zip(fast, slow, strict=True):
         assert (a.solved, a.method, a.message, a.stars) == (b.solved, b.method, b.message, b.stars)

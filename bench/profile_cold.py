@@ -13,7 +13,9 @@ three ways and reports the median and mean us a frame:
 
 Each is split into the compiled first pass (the call made from the centroids as given,
 ``first_pass.frame_first_pass_kernel``, its entry point once the camera's set-up has one, or
-``first_pass_kernel`` on the general path; its argument dispatch included) and the rest (Python around it, and any later passes). A last row
+``first_pass_kernel`` on the general path; its argument dispatch included; since session 35
+``frame_chain.frame_chain_kernel``, which runs the fallback chain too where the first pass
+proves nothing) and the rest (Python around it, and any later passes). A last row
 times the first pass evicted but with its code warmed by another frame just before: what the
 frame's own data costs (docs/performance.md, session 20).
 """
@@ -38,7 +40,8 @@ from service.core.presets import PRESETS  # noqa: E402
 from service.core.sim import SimConfig, simulate_frames  # noqa: E402
 from service.core.warmup import warm_up  # noqa: E402
 
-KERNELS = ((pipeline, "frame_first_pass_kernel"), (first_pass_mod, "first_pass_kernel"))
+KERNELS = ((pipeline, "frame_first_pass_kernel"), (first_pass_mod, "first_pass_kernel"),
+           (pipeline, "frame_chain_kernel"), (pipeline, "FRAME_CHAIN"))
 
 
 class _Timed:

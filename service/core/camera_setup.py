@@ -50,6 +50,8 @@ class CameraSetup:
     """The image's centre and corners, body frame (:func:`~.verify.camera_probes`)."""
     arrays: dict[int, RigArrays] = field(default_factory=dict)
     """The packed camera rows per frame size (:func:`~.match.rig_arrays`)."""
+    chains: dict[Any, Any] = field(default_factory=dict)
+    """The fallback chain's arguments per frame size (:func:`~.frame_chain.chain_setup`)."""
     entry: list[Any] = field(default_factory=lambda: [None])
     """``[e]``: :func:`~.first_pass.frame_first_pass_kernel`'s compiled entry for this set-up's
     argument types, once a call through the dispatcher has shown them (None until then, or where

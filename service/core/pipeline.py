@@ -22,8 +22,18 @@ from .camera import Camera, brightest_first
 from .camera_setup import SETUP_SIZES_KEPT, CameraSetup, keep_setup, kept_setup
 from .deeper import refine_deeper
 from .errors import InvalidInputError
-from .fallback_pass import Chain, fallbacks
+from .fallback_pass import MIN_CLOCK_S, Chain, fallbacks
 from .finish import solution
+from .frame_chain import (
+    FRAME_CHAIN,
+    STAGE_BACK,
+    STAGE_CHAIN,
+    ChainOutcome,
+    ChainSetup,
+    chain_setup,
+    frame_chain_kernel,
+    unpack_chain,
+)
 from .first_pass import (
     FirstPass,
     _static_args,
@@ -197,6 +207,16 @@ COMPILED_FALLBACKS = True
 (:mod:`service.core.fallback_pass`; a small frame's and, since session 18, a larger one's);
 False takes the general loop (the tests compare the two)."""
 
+FRAME_CHAIN_CALL = True
+"""Run the fallback chain in the first pass's own compiled call where the pipeline would call
+it after the first pass's exhaustive miss (:mod:`service.core.frame_chain`: no observation, no
+second call); False makes the two calls (the tests compare the two)."""
+
+FIRST_PASS_CLOCK_S = 0.05
+"""Time the first pass may take at most, beyond :data:`~.fallback_pass.MIN_CLOCK_S`: the chain
+runs in the first pass's call only when the frame has both left before that call (the first
+pass's work is bounded by its probes and checks, well under this)."""
+
 COMPILED_SETTLE = True
 """Finish an answer that another method proved (one camera, no epoch or aberration) as the first
 pass finishes its own, in one compiled call (:func:`~service.core.first_pass.settle`: the
@@ -277,6 +297,8 @@ def solve_rig(
     fp: FirstPass | None = None
     arrays = None
     fp_s = 0.0  # the first pass's time when it ran before the observation (counted in identify)
+    outcome: ChainOutcome | None = None  # the chain's answer, when it ran in the first pass's call (FRAME_CHAIN)
+    chain_back = False  # the chain ran there and handed the frame back to the general loop
     if setup is not None:  # what the first pass asks of the observation, kept with the camera
         n = len(frames[0][0])
         arrays = setup.arrays.get(n)
@@ -291,7 +313,14 @@ def solve_rig(
             xy = np.ascontiguousarray(cents.xy, dtype=np.float64)
             flux = np.ascontiguousarray(cents.flux, dtype=np.float64)
             entry = setup.entry[0]
-            if entry is not None and xy.ndim == 2 and flux.ndim == 1:  # (first_pass.kernel_entry)
+            usual = xy.ndim == 2 and flux.ndim == 1  # the kernels' usual types: their entry points (_entry)
+            cs = _frame_chain(setup, n, method, options, t0)
+            if cs is not None:  # the first pass and, after its exhaustive miss, the chain (FRAME_CHAIN)
+                stage, solved, _, ints, floats = (FRAME_CHAIN if usual else frame_chain_kernel)(
+                    xy, flux, float(cam.cx), float(cam.cy), float(cam.f_px), arrays.mounts, arrays.cams, arrays.dist,
+                    arrays.rows, arrays.row_off, setup.probes, setup.packed, cs.head, cs.n_tri, cs.tri, cs.tri_ext,
+                    cs.static)
+            elif entry is not None and usual:  # (first_pass.kernel_entry)
                 solved, _, ints, floats = entry(xy, flux, float(cam.cx), float(cam.cy), float(cam.f_px), arrays.mounts,
                                                 arrays.cams, arrays.dist, arrays.rows, arrays.row_off, setup.probes,
                                                 setup.packed)
@@ -304,8 +333,20 @@ def solve_rig(
             if solved:
                 timings["vectors"], timings["identify"] = 0.0, (t2 - t0) * 1e3
                 return _stamped(solved_solution(ints, floats), ["quad"], timings, t0, t2)
-            fp, fp_s = unsolved(ints, floats, plan[0][0]), t2 - t0
-    obs = _observation(frames, mountings)
+            if cs is not None and stage == STAGE_CHAIN:
+                outcome = unpack_chain(ints, floats, cs, n)
+                if outcome.chain.found is None:  # refused with no observation made
+                    timings["vectors"], timings["identify"] = 0.0, (t2 - t0) * 1e3
+                    timings["total"] = (time.perf_counter() - t0) * 1e3
+                    sparse = isinstance(given, NavDatabaseSet) and 3 <= n <= SPARSE_ADVICE_STARS
+                    return no_solution(method, ["quad", *outcome.chain.tried], outcome.chain.trials,
+                                       t2 > t0 + options.timeout_ms / 1e3, timings, outcome.chain.unprovable, n,
+                                       sparse_advice((cam,)) if sparse else "")
+                fp_s = t2 - t0
+            else:
+                fp, fp_s = unsolved(ints, floats, plan[0][0]), t2 - t0
+                chain_back = cs is not None and stage == STAGE_BACK
+    obs = _observation(frames, mountings) if outcome is None else outcome.observation(frames[0][1], mountings)
     if setup is not None:
         obs.__dict__["_image_probes"] = setup.probes
         obs.__dict__["_kernel_arrays"] = arrays
@@ -320,7 +361,9 @@ def solve_rig(
     plain = hint is None and options.epoch is None and options.observer_velocity_km_s is None
     quad_first = bool(plan) and plan[0][1][:1] == ["quad"]
     chain: Chain | None = None
-    if COMPILED_FIRST_PASS and plain and quad_first and len(obs.cameras) == 1 and len(obs) >= 5:
+    if outcome is not None:
+        chain = outcome.chain
+    elif COMPILED_FIRST_PASS and plain and quad_first and len(obs.cameras) == 1 and len(obs) >= 5:
         # auto's first pass in one compiled call (service.core.first_pass); a frame it does not
         # prove goes on below with the search's result in hand (QuadMatcher takes it up)
         if fp is None:
@@ -334,7 +377,7 @@ def solve_rig(
         status, _, _, exhausted = fp.search[0][:4].tolist()
         few = len(obs) <= QUERY_STARS  # (5 or more here)
         if (COMPILED_FALLBACKS and (SMALL_FRAME_FALLBACK_FIRST or not few) and len(sigmas) == 1
-                and status == STATUS_NONE and exhausted):
+                and status == STATUS_NONE and exhausted and not chain_back):
             # the first pass looked up every pattern: the fallbacks in one compiled call too
             chain = fallbacks(obs, plan, fp.trials, FEW_STARS_MAX_TRIALS if few else MANY_STARS_MAX_TRIALS,
                               sigmas[0], options.match_radius_px, options.max_false_prob, options.max_stars,
@@ -476,6 +519,21 @@ def _first_sight(db: NavDatabase | NavDatabaseSet, camera: Camera, method: str, 
                         camera_probes(camera, IDENTITY_MOUNTING))
     keep_setup(db, setup)
     return setup
+
+
+def _frame_chain(setup: CameraSetup, n: int, method: str, options: SolveOptions, t0: float) -> ChainSetup | None:
+    """The chain's arguments where the pipeline would run it after the first pass's
+    exhaustive miss (:mod:`.frame_chain`; a frame of ``n`` stars, its clock started at
+    ``t0``), else None (the first pass alone; the rest as before)."""
+    if not (FRAME_CHAIN_CALL and COMPILED_FALLBACKS and options.retry_sigma_factor <= 1):
+        return None
+    few = n <= QUERY_STARS
+    if not (SMALL_FRAME_FALLBACK_FIRST or not few):
+        return None
+    if t0 + options.timeout_ms / 1e3 - time.perf_counter() < MIN_CLOCK_S + FIRST_PASS_CLOCK_S:
+        return None  # (the chain does not look at the clock: fallback_pass.MIN_CLOCK_S)
+    return chain_setup(setup, n, FEW_STARS_MAX_TRIALS if few else MANY_STARS_MAX_TRIALS,
+                       method == "auto" and n <= FIRST_QUAD_ONLY_STARS)
 
 
 def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: list[np.ndarray]) -> Observation:

@@ -7,7 +7,7 @@ import dataclasses
 
 import pytest
 
-from service.core import camera_setup, pipeline
+from service.core import camera_setup, frame_chain, pipeline
 from service.core.camera_setup import CameraSetup, keep_setup, kept_setup
 from service.core.pipeline import SolveOptions, solve
 from service.core.presets import PRESETS
@@ -35,7 +35,9 @@ def test_frames_solved_with_the_kept_setup_answer_as_without(default_set_db, pre
     assert setup is not None and setup.camera is p.camera and setup.options is options
     kept = [solve(c, p.camera, default_set_db, options=options) for c in frames]
     assert kept_setup(default_set_db, p.camera, "auto", options) is setup  # used, not remade
-    assert setup.entry[0] is not None  # the later frames called the kernel's entry (first_pass.kernel_entry)
+    # the later frames called a kernel's entry: the first pass's (first_pass.kernel_entry) or, where
+    # the chain may follow it, the call that runs both (frame_chain.FRAME_CHAIN)
+    assert setup.entry[0] is not None or frame_chain.FRAME_CHAIN.entry is not None
     # the general path, which keeps no set-up: the same answers
     monkeypatch.setattr(pipeline, "COMPILED_FIRST_PASS", False)
     fresh = []
@@ -58,6 +60,10 @@ def test_frames_solved_with_the_kept_setup_answer_as_without(default_set_db, pre
     # machine inside ``vectors`` (1.9 ms once, against ~0.05) does not decide it
     refused = [solve(frames[-1], p.camera, default_set_db, options=options) for _ in range(5)]  # the points
     assert not any(s.solved for s in refused)
+    # (the first pass and the chain in one call, frame_chain: the refusal made no Observation)
+    assert all(s.timings_ms["vectors"] == 0.0 < s.timings_ms["identify"] for s in refused)
+    monkeypatch.setattr(pipeline, "FRAME_CHAIN_CALL", False)  # two calls: the observation between them
+    refused = [solve(frames[-1], p.camera, default_set_db, options=options) for _ in range(5)]
     vectors = min(s.timings_ms["vectors"] for s in refused)
     assert 0.0 < vectors < min(s.timings_ms["identify"] for s in refused) / 5
 

@@ -22,6 +22,7 @@ from ..conftest import ROOT
 KERNELS = {
     "service.core.first_pass": ["first_pass_kernel", "settle_kernel", "packed_settle_kernel", "frame_first_pass_kernel"],
     "service.core.fallback_pass": ["chain_kernel", "_chain", "_maxangle_pass"],
+    "service.core.frame_chain": ["frame_chain_kernel"],
     "service.core.methods.quad_kernel": ["quad_search", "_verify"],
     "service.core.check_kernel": ["verify_pairs", "recheck_pairs", "could_pair_more"],
     "service.core.match": ["_refine", "_match_rig", "_wahba_pairs"],
@@ -49,6 +50,8 @@ for key in ("seed000", "seed001", "seed002"):
         solve(f.centroids, p.camera, db, options=SolveOptions(centroid_sigma_px=1.0))  # equal: the same set-up
         solve_rig([(f.centroids, p.camera, None)], db, options=options)  # a one-camera rig: the general path
     solve(random_points(p.camera, 25, 1), p.camera, db)
+    # a retry sigma: the first pass's call alone (the chain runs in the general loop)
+    solve(f.centroids, p.camera, db, options=SolveOptions(centroid_sigma_px=1.0, retry_sigma_factor=2.0))
 out = {{}}
 for module, names in {KERNELS!r}.items():
     m = importlib.import_module(module)
@@ -69,5 +72,5 @@ def test_the_default_path_compiles_each_kernel_once(default_set_db: object) -> N
     # called from Python (quad_search no longer is on these frames: since session 18 the
     # fallbacks of a frame of more than QUERY_STARS stars run compiled too, as a small frame's did)
     for name in ("first_pass_kernel", "packed_settle_kernel", "chain_kernel", "_triangles_extended", "search_chunks",
-                 "frame_first_pass_kernel"):
+                 "frame_first_pass_kernel", "frame_chain_kernel"):
         assert len(signatures[name]) == 1, (name, signatures[name])

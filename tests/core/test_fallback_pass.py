@@ -23,7 +23,10 @@ def _same(a, b) -> None:
 
 
 def _counting(monkeypatch) -> list:
-    """The pipeline's calls of :func:`fallbacks` from now on, with what each returned."""
+    """The pipeline's calls of :func:`fallbacks` from now on, with what each returned (the
+    chain as its own call: ``pipeline.FRAME_CHAIN_CALL`` off; tests/core/test_frame_chain.py
+    compares the chain in the first pass's call with this one)."""
+    monkeypatch.setattr(pipeline, "FRAME_CHAIN_CALL", False)
     calls = []
 
     def counted(*args, **kwargs):

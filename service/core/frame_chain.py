@@ -1,0 +1,172 @@
+"""``auto``'s first pass and, where it proves nothing, the fallback chain: one compiled call.
+
+A one-camera frame the first pass (:mod:`.first_pass`) searched in full without a proof went
+back to Python, which built the :class:`~.verify.Observation`, the chain's arguments and its
+call (:func:`~.fallback_pass.fallbacks`), and then the refusal: on seed 002's unsolved frames of
+5-6 stars (a quarter of its frames at 1 px with 2 false stars) ~13 us of a ~60-us frame between
+the two compiled calls (``/work/s36/seg56.py``: the observation 3.5, the chain's set-up and
+answer 6, the first pass's result 1, the chain's arguments handed over again ~3). Here
+:func:`frame_chain_kernel` makes the vectors, runs the first pass and, on the same terms as
+the pipeline (an exhaustive miss), the chain, and hands back one of three things (``stage``):
+
+- :data:`STAGE_FIRST`: the first pass's own result, as :func:`~.first_pass.frame_first_pass_kernel`
+  returns it (a proof, or a search the chain does not take up: the general path goes on);
+- :data:`STAGE_BACK`: the chain handed the frame back (:data:`~.fallback_pass.CHAIN_BACK`); the
+  first pass's result, for the general loop, which runs the chain's passes itself;
+- :data:`STAGE_CHAIN`: what the chain did, packed (:func:`unpack_chain`): a refusal needs no
+  observation, and a proof gets one from the vectors made here.
+
+The pipeline takes this call where it would have called the chain after the first pass
+(``pipeline.FRAME_CHAIN``): the same passes, budget and answers (``tests/core/test_frame_chain.py``
+compares the two frame by frame).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ._entry import EntryCall
+from .camera import Camera, brightest_first
+from .fallback_pass import CHAIN_BACK, RAN, UNPROVABLE, Chain, _setup, chain_kernel
+from .first_pass import first_pass_kernel
+from .match import frame_rows
+from .methods.maxangle import MAX_CANDIDATES, _extension_array, _pattern_array
+from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS
+from .methods.quad_kernel import STATUS_NONE
+from .navdb.reader import NavDatabase
+from .packed import Packed, pack
+from .verify import CHECKS_PER_CHUNK, Observation, Verified, Verifier
+
+STAGE_FIRST, STAGE_BACK, STAGE_CHAIN = 0, 1, 2
+_NAMES = ("quad", "maxangle")
+
+
+class ChainSetup(NamedTuple):
+    """The chain's arguments for one camera set-up and frame size (kept on the set-up)."""
+
+    passes: list[tuple[NavDatabase, int]]
+    kinds: np.ndarray
+    head: Packed
+    """The chain's per-camera numbers: kinds, members, the budget, tolerance, radius, bounds."""
+    static: Packed
+    """The members' arrays (:func:`~.fallback_pass._setup`)."""
+    n_tri: int
+    tri: np.ndarray
+    tri_ext: np.ndarray
+
+
+def chain_setup(setup: Any, n: int, few_trials: int, first_quad_only: bool) -> ChainSetup | None:
+    """The chain's arguments for a frame of ``n`` stars on camera set-up ``setup``
+    (:class:`~.camera_setup.CameraSetup`), as :func:`~.fallback_pass.fallbacks` would pass them;
+    None where the chain does not take this plan. Kept on the set-up per ``n``."""
+    key = (n, few_trials, first_quad_only)
+    if key in setup.chains:
+        return setup.chains[key]
+    cam, options = setup.camera, setup.options
+    sigma = float(options.centroid_sigma_px)
+    radius = float(options.match_radius_px or max(2.5, 3.0 * sigma))
+    few = n <= QUERY_STARS
+    got = _setup(setup.plan, cam, radius, few, first_quad_only)
+    cs = None
+    if got is not None:
+        passes, kinds, members, static = got
+        scale = float(cam.pixel_scale_rad)
+        tol = (3.0 * math.sqrt(2.0) * sigma + 0.5) * scale
+        head = pack((kinds, members, int(few_trials), float(tol), radius, scale, float(options.max_false_prob),
+                     float(Verifier.strong_false_prob), int(Verifier.confirm_patterns), int(Verifier.screen_stars),
+                     int(Verifier.min_matches), float(cam.width) * float(cam.height), 3.0 * radius * scale,
+                     MAX_CANDIDATES, CHECKS_PER_CHUNK, QUERY_STARS, MAX_PROBES, MAX_CHECKS))
+        n_tri = min(n, int(options.max_stars))
+        cs = ChainSetup(passes, kinds, head, static, n_tri, _pattern_array(n_tri), _extension_array(n_tri, n))
+    if len(setup.chains) >= 256:
+        setup.chains.clear()
+    setup.chains[key] = cs
+    return cs
+
+
+@njit(cache=True, nogil=True)
+def frame_chain_kernel(xy_in, flux_in, cx, cy, f_px, mounts, cams, dist, rows, row_off, probes, static, head, n_tri,
+                       tri, tri_ext, chain_static):
+    """The first pass on a pinhole camera's centroids as given (px, fluxes; ``static`` its
+    :class:`~.packed.Packed` arguments), then, after an exhaustive miss, the fallback chain
+    (``head``, ``n_tri``, ``tri``, ``tri_ext``, ``chain_static``: :class:`ChainSetup`).
+    Returns ``(stage, solved, used_deep, ints, floats)`` (see the module's docstring)."""
+    order, xy, vec, flux = brightest_first(xy_in, flux_in, cx, cy, f_px)
+    solved, used_deep, ints, floats = first_pass_kernel(vec, xy, flux, True, mounts, cams, dist, rows, row_off, order,
+                                                        probes, *static.args)
+    if solved or ints[0] != STATUS_NONE or ints[3] == 0:  # a proof, or not an exhaustive miss
+        return STAGE_FIRST, solved, used_deep, ints, floats
+    (kinds, members, few_trials, tol, radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns,
+     screen_stars, min_matches, area, agree_limit, max_candidates, checks_per_chunk, n_use, max_probes,
+     max_checks) = head.args
+    status, at, m_obs, m_cat, r, prob, n_trials, trials, ran = chain_kernel(
+        vec, xy, mounts, cams, dist, rows, row_off, probes, kinds, members, ints[1], few_trials, n_tri, tri, tri_ext,
+        tol, radius_px, pixel_scale, max_false_prob, strong_false_prob, confirm_patterns, screen_stars, min_matches,
+        area, agree_limit, max_candidates, checks_per_chunk, n_use, max_probes, max_checks, chain_static)
+    if status == CHAIN_BACK:
+        return STAGE_BACK, False, False, ints, floats
+    n, n_m, n_ran = len(order), len(m_obs), len(ran)
+    c_ints = np.empty(6 + n_ran + 2 * n_m + n, np.int64)
+    c_ints[0], c_ints[1], c_ints[2], c_ints[3], c_ints[4], c_ints[5] = status, at, n_trials, trials, n_ran, n_m
+    c_ints[6:6 + n_ran] = ran
+    i = 6 + n_ran
+    c_ints[i:i + n_m] = m_obs
+    c_ints[i + n_m:i + 2 * n_m] = m_cat
+    c_ints[i + 2 * n_m:] = order
+    c_floats = np.empty(10 + 6 * n)
+    c_floats[0] = prob
+    c_floats[1:10] = r.ravel()
+    c_floats[10:10 + 2 * n] = xy.ravel()
+    c_floats[10 + 2 * n:10 + 5 * n] = vec.ravel()
+    c_floats[10 + 5 * n:] = flux
+    return STAGE_CHAIN, False, False, c_ints, c_floats
+
+
+FRAME_CHAIN = EntryCall(frame_chain_kernel)
+""":func:`frame_chain_kernel` past the dispatcher once its one signature is known (:mod:`._entry`)."""
+
+
+class ChainOutcome(NamedTuple):
+    """What the chain did, from :data:`STAGE_CHAIN`'s arrays (as :func:`~.fallback_pass.fallbacks`
+    tells it), and the frame's stars as the call ordered them (brightest first)."""
+
+    chain: Chain
+    order: np.ndarray
+    xy: np.ndarray
+    vec: np.ndarray
+    flux: np.ndarray
+
+    def observation(self, cam: Camera, mountings: list[np.ndarray]) -> Observation:
+        """The frame's :class:`~.verify.Observation` from these stars (``pipeline._observation``'s,
+        without making the vectors again)."""
+        camera, rows, _ = frame_rows(len(self.order))
+        return Observation(self.vec, self.xy, self.order, camera, (cam,), tuple(mountings), by_camera=(rows,),
+                           flux=self.flux)
+
+
+def unpack_chain(ints: np.ndarray, floats: np.ndarray, cs: ChainSetup, n: int) -> ChainOutcome:
+    """:data:`STAGE_CHAIN`'s packed arrays of a frame of ``n`` stars, as :class:`ChainOutcome`."""
+    status, at, n_trials, trials, n_ran, n_m = ints[:6].tolist()
+    ran = ints[6:6 + n_ran].tolist()
+    kinds = cs.kinds
+    tried = [_NAMES[kinds[i]] for i in range(n_ran) if ran[i] == RAN]
+    unprovable = [_NAMES[kinds[i]] for i in range(n_ran) if ran[i] == UNPROVABLE]
+    i = 6 + n_ran
+    order = ints[i + 2 * n_m:]
+    xy = floats[10:10 + 2 * n].reshape(n, 2)
+    vec = floats[10 + 2 * n:10 + 5 * n].reshape(n, 3)
+    flux = floats[10 + 5 * n:]
+    if at < 0:
+        return ChainOutcome(Chain(None, None, _NAMES[kinds[-1]], trials, tried, unprovable), order, xy, vec, flux)
+    found = Verified(ints[i:i + n_m].copy(), ints[i + n_m:i + 2 * n_m].copy(), floats[1:10].reshape(3, 3).copy(),
+                     float(floats[0]), int(n_trials))
+    chain = Chain(found, cs.passes[at][0], _NAMES[kinds[at]], trials, tried, unprovable)
+    return ChainOutcome(chain, order, xy, vec, flux)
+
+
+__all__ = ["FRAME_CHAIN", "STAGE_BACK", "STAGE_CHAIN", "STAGE_FIRST", "ChainOutcome", "ChainSetup", "chain_setup",
+           "frame_chain_kernel", "unpack_chain"]

@@ -59,13 +59,16 @@ class ChainSetup(NamedTuple):
     tri_ext: np.ndarray
 
 
-def chain_setup(setup: Any, n: int, few_trials: int, first_quad_only: bool) -> ChainSetup | None:
+def chain_setup(setup: Any, n: int, few_trials: int, first_quad_only: bool, build: bool = True) -> ChainSetup | None:
     """The chain's arguments for a frame of ``n`` stars on camera set-up ``setup``
     (:class:`~.camera_setup.CameraSetup`), as :func:`~.fallback_pass.fallbacks` would pass them;
-    None where the chain does not take this plan. Kept on the set-up per ``n``."""
+    None where the chain does not take this plan. Kept on the set-up per ``n``; ``build``
+    False: only if kept already (a camera's first frames make them only after a miss of the
+    first pass, the chain's ~40 us being a first sight's own cost otherwise: each real image is
+    one)."""
     key = (n, few_trials, first_quad_only)
-    if key in setup.chains:
-        return setup.chains[key]
+    if key in setup.chains or not build:
+        return setup.chains.get(key)
     cam, options = setup.camera, setup.options
     sigma = float(options.centroid_sigma_px)
     radius = float(options.match_radius_px or max(2.5, 3.0 * sigma))

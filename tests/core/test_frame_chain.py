@@ -3,6 +3,8 @@ frame for frame (:mod:`service.core.frame_chain`)."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -59,13 +61,15 @@ def test_the_chain_in_the_first_pass_call_answers_as_two_calls(monkeypatch, defa
 
 def test_random_points_are_refused_as_by_two_calls(monkeypatch, default_set_db) -> None:
     """Frames of 5-39 random points on seed 000's camera: every pass runs to its end (the many-star
-    budget above ``QUERY_STARS``), and the refusal is made with no observation."""
+    budget above ``QUERY_STARS``), and the refusal is made with no observation. Two frames of
+    each size: a set-up makes the chain's arguments for a size after its first miss, so the
+    first frame makes two calls, the second one."""
     p = PRESETS["seed000"]
     rng = np.random.default_rng(52)
     seen = _counting(monkeypatch)
-    frames = [random_points(p.camera, int(n), rng) for n in (5, 6, 7, 9, 12, 20, 30, 39)]
-    _both(monkeypatch, default_set_db, frames, p.camera, SolveOptions(centroid_sigma_px=1.0))
-    assert len(seen) == len(frames) and all(s.chain.found is None for s in seen)
+    frames = [random_points(p.camera, int(n), rng) for n in (5, 6, 7, 9, 12, 20, 30, 39) for _ in range(2)]
+    _both(monkeypatch, default_set_db, frames, p.camera, SolveOptions(centroid_sigma_px=1.0, timeout_ms=495.0))
+    assert len(seen) == len(frames) // 2 and all(s.chain.found is None for s in seen)
 
 
 def test_a_spent_budget_is_counted_as_by_two_calls(monkeypatch, default_set_db) -> None:
@@ -106,8 +110,31 @@ def test_a_frame_near_its_time_limit_makes_two_calls(default_set_db) -> None:
     solve(frame, p.camera, default_set_db, options=options)
     setup = kept_setup(default_set_db, p.camera, "auto", options)
     assert setup is not None
-    assert pipeline._frame_chain(setup, 6, "auto", options, __import__("time").perf_counter()) is None
-    fresh = SolveOptions(centroid_sigma_px=1.0)
+    assert pipeline._frame_chain(setup, 6, "auto", options, time.perf_counter()) is None
+    fresh = SolveOptions(centroid_sigma_px=1.0, timeout_ms=497.0)
     solve(frame, p.camera, default_set_db, options=fresh)
-    assert pipeline._frame_chain(kept_setup(default_set_db, p.camera, "auto", fresh), 6, "auto", fresh,
-                                 __import__("time").perf_counter()) is not None
+    setup = kept_setup(default_set_db, p.camera, "auto", fresh)
+    assert pipeline._frame_chain(setup, 6, "auto", fresh, time.perf_counter()) is None  # not made before a miss
+    assert pipeline._frame_chain(setup, 6, "auto", fresh, None) is not None  # made (after a miss)
+    assert pipeline._frame_chain(setup, 6, "auto", fresh, time.perf_counter()) is not None  # then kept
+
+
+def test_a_new_cameras_first_frames_make_the_chains_arguments_only_after_a_miss(default_set_db) -> None:
+    """A camera's frame that the first pass proves costs no chain set-up (each real image is a
+    camera of its own); after a miss, the camera's later frames of that size take the one call."""
+    from service.core.camera_setup import kept_setup
+
+    p = PRESETS["seed002"]
+    options = SolveOptions(centroid_sigma_px=1.0, timeout_ms=496.0)
+    frames = simulate_frames(p.camera, 200, SimConfig(mag_limit=p.mag_limit, centroid_noise_px=1.0, false_stars=0),
+                             rng=56)
+    proven = next(f.centroids for f in frames if len(f.centroids) >= 9)
+    assert solve(proven, p.camera, default_set_db, options=options).solved
+    setup = kept_setup(default_set_db, p.camera, "auto", options)
+    assert not setup.chains
+    points = random_points(p.camera, 8, np.random.default_rng(57))
+    first = solve(points, p.camera, default_set_db, options=options)
+    assert len(setup.chains) == 1 and first.timings_ms["vectors"] > 0.0  # two calls, then made
+    again = solve(points, p.camera, default_set_db, options=options)
+    assert again.timings_ms["vectors"] == 0.0  # one call: no observation
+    _same(first, again)

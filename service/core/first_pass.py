@@ -143,13 +143,13 @@ def unsolved(ints: np.ndarray, floats: np.ndarray, member: NavDatabase) -> First
                      (0.0, 0.0, 0.0), int(ints[1]))
 
 
-def solved_solution(ints: np.ndarray, floats: np.ndarray) -> Solution:
-    """The :class:`~.types.Solution` of a proven first pass, straight from the arrays
-    :func:`settle_kernel` packs (what ``solution_of(*fp.columns, ...)`` gives, without the
-    :class:`FirstPass` between)."""
+def solved_solution(ints: np.ndarray, floats: np.ndarray, method: str = "quad") -> Solution:
+    """The :class:`~.types.Solution` of a proven first pass (or of a fallback's answer settled
+    in the same call, named ``method``), straight from the arrays :func:`settle_kernel` packs
+    (what ``solution_of(*fp.columns, ...)`` gives, without the :class:`FirstPass` between)."""
     n = int(ints[1])
     prob, rms, sd0, sd1, sd2 = floats[9:14].tolist()
-    return solution_of(ints[2 + 2 * n:], floats[14 + n:], rms, (sd0, sd1, sd2), prob, "quad")
+    return solution_of(ints[2 + 2 * n:], floats[14 + n:], rms, (sd0, sd1, sd2), prob, method)
 
 
 @njit(cache=True, nogil=True)

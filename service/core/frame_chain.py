@@ -14,7 +14,13 @@ the pipeline (an exhaustive miss), the chain, and hands back one of three things
 - :data:`STAGE_BACK`: the chain handed the frame back (:data:`~.fallback_pass.CHAIN_BACK`); the
   first pass's result, for the general loop, which runs the chain's passes itself;
 - :data:`STAGE_CHAIN`: what the chain did, packed (:func:`unpack_chain`): a refusal needs no
-  observation, and a proof gets one from the vectors made here.
+  observation, and a proof gets one from the vectors made here;
+- :data:`STAGE_SETTLED`: a fallback's answer on the first member, finished here as the first
+  pass finishes its own (:func:`~.first_pass.settle_kernel`, with the first member's settle
+  arguments): the answer's arrays as a proof of the first pass's, and the pass that proved it
+  and what became of each pass in ``stage``'s upper bits (:func:`settled_passes`). Seed 002's
+  7-star frames, most of which ``sparse``'s ``maxangle`` proves, spent ~25 us in Python after
+  the call: the chain's outcome, the observation, the settle's call and its result.
 
 The pipeline takes this call where it would have called the chain after the first pass
 (``pipeline.FRAME_CHAIN``): the same passes, budget and answers (``tests/core/test_frame_chain.py``
@@ -31,8 +37,8 @@ from numba import njit
 
 from ._entry import EntryCall
 from .camera import Camera, brightest_first
-from .fallback_pass import CHAIN_BACK, RAN, UNPROVABLE, Chain, _setup, chain_kernel
-from .first_pass import first_pass_kernel
+from .fallback_pass import CHAIN_BACK, CHAIN_FOUND, RAN, UNPROVABLE, Chain, _setup, chain_kernel
+from .first_pass import _settle_packed, first_pass_kernel, settle_kernel
 from .match import frame_rows
 from .methods.maxangle import MAX_CANDIDATES, _extension_array, _pattern_array
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS
@@ -41,7 +47,10 @@ from .navdb.reader import NavDatabase
 from .packed import Packed, pack
 from .verify import CHECKS_PER_CHUNK, Observation, Verified, Verifier
 
-STAGE_FIRST, STAGE_BACK, STAGE_CHAIN = 0, 1, 2
+STAGE_FIRST, STAGE_BACK, STAGE_CHAIN, STAGE_SETTLED = 0, 1, 2, 3
+STAGE_BITS = 4
+"""``stage``'s low bits; above them, for :data:`STAGE_SETTLED`, the proving pass (4 bits) and
+each pass's fate (2 bits a pass)."""
 _NAMES = ("quad", "maxangle")
 
 
@@ -54,6 +63,8 @@ class ChainSetup(NamedTuple):
     """The chain's per-camera numbers: kinds, members, the budget, tolerance, radius, bounds."""
     static: Packed
     """The members' arrays (:func:`~.fallback_pass._setup`)."""
+    settle: Packed
+    """The first member's settle arguments (:func:`~.first_pass._settle_packed`)."""
     n_tri: int
     tri: np.ndarray
     tri_ext: np.ndarray
@@ -84,7 +95,10 @@ def chain_setup(setup: Any, n: int, few_trials: int, first_quad_only: bool, buil
                      int(Verifier.min_matches), float(cam.width) * float(cam.height), 3.0 * radius * scale,
                      MAX_CANDIDATES, CHECKS_PER_CHUNK, QUERY_STARS, MAX_PROBES, MAX_CHECKS))
         n_tri = min(n, int(options.max_stars))
-        cs = ChainSetup(passes, kinds, head, static, n_tri, _pattern_array(n_tri), _extension_array(n_tri, n))
+        settle = _settle_packed(setup.plan[0][0], setup.deepest, cam, sigma, options.match_radius_px,
+                                float(options.max_false_prob))
+        cs = ChainSetup(passes, kinds, head, static, settle, n_tri, _pattern_array(n_tri),
+                        _extension_array(n_tri, n))
     if len(setup.chains) >= 256:
         setup.chains.clear()
     setup.chains[key] = cs
@@ -93,10 +107,11 @@ def chain_setup(setup: Any, n: int, few_trials: int, first_quad_only: bool, buil
 
 @njit(cache=True, nogil=True)
 def frame_chain_kernel(xy_in, flux_in, cx, cy, f_px, mounts, cams, dist, rows, row_off, probes, static, head, n_tri,
-                       tri, tri_ext, chain_static):
+                       tri, tri_ext, chain_static, settle_static, settle_here):
     """The first pass on a pinhole camera's centroids as given (px, fluxes; ``static`` its
     :class:`~.packed.Packed` arguments), then, after an exhaustive miss, the fallback chain
-    (``head``, ``n_tri``, ``tri``, ``tri_ext``, ``chain_static``: :class:`ChainSetup`).
+    (``head``, ``n_tri``, ``tri``, ``tri_ext``, ``chain_static``: :class:`ChainSetup`), and
+    where ``settle_here`` the finish of its answer on the first member (``settle_static``).
     Returns ``(stage, solved, used_deep, ints, floats)`` (see the module's docstring)."""
     order, xy, vec, flux = brightest_first(xy_in, flux_in, cx, cy, f_px)
     solved, used_deep, ints, floats = first_pass_kernel(vec, xy, flux, True, mounts, cams, dist, rows, row_off, order,
@@ -112,6 +127,14 @@ def frame_chain_kernel(xy_in, flux_in, cx, cy, f_px, mounts, cams, dist, rows, r
         area, agree_limit, max_candidates, checks_per_chunk, n_use, max_probes, max_checks, chain_static)
     if status == CHAIN_BACK:
         return STAGE_BACK, False, False, ints, floats
+    if settle_here and status == CHAIN_FOUND and members[at] == 0:
+        ok, used_deep, s_ints, s_floats = settle_kernel(vec, xy, flux, True, mounts, cams, dist, rows, row_off, order,
+                                                        m_obs, m_cat, r, prob, n_trials, *settle_static.args)
+        if ok:
+            code = STAGE_SETTLED | (at << STAGE_BITS)
+            for i in range(len(ran)):
+                code |= ran[i] << (2 * STAGE_BITS + 2 * i)
+            return code, True, used_deep, s_ints, s_floats
     n, n_m, n_ran = len(order), len(m_obs), len(ran)
     c_ints = np.empty(6 + n_ran + 2 * n_m + n, np.int64)
     c_ints[0], c_ints[1], c_ints[2], c_ints[3], c_ints[4], c_ints[5] = status, at, n_trials, trials, n_ran, n_m
@@ -151,6 +174,14 @@ class ChainOutcome(NamedTuple):
                            flux=self.flux)
 
 
+def settled_passes(stage: int, cs: ChainSetup) -> tuple[str, list[str]]:
+    """A :data:`STAGE_SETTLED` call's proving method and the methods the chain ran, in order
+    (``stage``'s upper bits)."""
+    at = (stage >> STAGE_BITS) & 15
+    tried = [_NAMES[cs.kinds[i]] for i in range(len(cs.kinds)) if (stage >> (2 * STAGE_BITS + 2 * i)) & 3 == RAN]
+    return _NAMES[cs.kinds[at]], tried
+
+
 def unpack_chain(ints: np.ndarray, floats: np.ndarray, cs: ChainSetup, n: int) -> ChainOutcome:
     """:data:`STAGE_CHAIN`'s packed arrays of a frame of ``n`` stars, as :class:`ChainOutcome`."""
     status, at, n_trials, trials, n_ran, n_m = ints[:6].tolist()
@@ -171,5 +202,5 @@ def unpack_chain(ints: np.ndarray, floats: np.ndarray, cs: ChainSetup, n: int) -
     return ChainOutcome(chain, order, xy, vec, flux)
 
 
-__all__ = ["FRAME_CHAIN", "STAGE_BACK", "STAGE_CHAIN", "STAGE_FIRST", "ChainOutcome", "ChainSetup", "chain_setup",
-           "frame_chain_kernel", "unpack_chain"]
+__all__ = ["FRAME_CHAIN", "STAGE_BACK", "STAGE_BITS", "STAGE_CHAIN", "STAGE_FIRST", "STAGE_SETTLED", "ChainOutcome",
+           "ChainSetup", "chain_setup", "frame_chain_kernel", "settled_passes", "unpack_chain"]

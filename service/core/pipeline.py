@@ -28,10 +28,12 @@ from .frame_chain import (
     FRAME_CHAIN,
     STAGE_BACK,
     STAGE_CHAIN,
+    STAGE_SETTLED,
     ChainOutcome,
     ChainSetup,
     chain_setup,
     frame_chain_kernel,
+    settled_passes,
     unpack_chain,
 )
 from .first_pass import (
@@ -319,7 +321,7 @@ def solve_rig(
                 stage, solved, _, ints, floats = (FRAME_CHAIN if usual else frame_chain_kernel)(
                     xy, flux, float(cam.cx), float(cam.cy), float(cam.f_px), arrays.mounts, arrays.cams, arrays.dist,
                     arrays.rows, arrays.row_off, setup.probes, setup.packed, cs.head, cs.n_tri, cs.tri, cs.tri_ext,
-                    cs.static)
+                    cs.static, cs.settle, COMPILED_SETTLE)
             elif entry is not None and usual:  # (first_pass.kernel_entry)
                 solved, _, ints, floats = entry(xy, flux, float(cam.cx), float(cam.cy), float(cam.f_px), arrays.mounts,
                                                 arrays.cams, arrays.dist, arrays.rows, arrays.row_off, setup.probes,
@@ -332,6 +334,9 @@ def solve_rig(
             t2 = time.perf_counter()
             if solved:
                 timings["vectors"], timings["identify"] = 0.0, (t2 - t0) * 1e3
+                if cs is not None and stage & 15 == STAGE_SETTLED:  # a fallback's answer, finished in the call
+                    used, ran = settled_passes(stage, cs)
+                    return _stamped(solved_solution(ints, floats, used), ["quad", *ran], timings, t0, t2)
                 return _stamped(solved_solution(ints, floats), ["quad"], timings, t0, t2)
             if cs is not None and stage == STAGE_CHAIN:
                 outcome = unpack_chain(ints, floats, cs, n)

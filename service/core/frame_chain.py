@@ -13,8 +13,11 @@ the pipeline (an exhaustive miss), the chain, and hands back one of three things
   returns it (a proof, or a search the chain does not take up: the general path goes on);
 - :data:`STAGE_BACK`: the chain handed the frame back (:data:`~.fallback_pass.CHAIN_BACK`); the
   first pass's result, for the general loop, which runs the chain's passes itself;
-- :data:`STAGE_CHAIN`: what the chain did, packed (:func:`unpack_chain`): a refusal needs no
-  observation, and a proof gets one from the vectors made here;
+- :data:`STAGE_REFUSED`: the chain proved nothing: the hypotheses it counted in ``ints[0]``,
+  what became of each pass in ``stage``'s upper bits (:func:`refused_chain`); the refusal needs
+  no observation;
+- :data:`STAGE_CHAIN`: a proof the call did not finish, packed (:func:`unpack_chain`), which
+  gets its observation from the vectors made here;
 - :data:`STAGE_SETTLED`: a fallback's answer on the first member, finished here as the first
   pass finishes its own (:func:`~.first_pass.settle_kernel`, with the first member's settle
   arguments): the answer's arrays as a proof of the first pass's, and the pass that proved it
@@ -47,10 +50,10 @@ from .navdb.reader import NavDatabase
 from .packed import Packed, pack
 from .verify import CHECKS_PER_CHUNK, Observation, Verified, Verifier
 
-STAGE_FIRST, STAGE_BACK, STAGE_CHAIN, STAGE_SETTLED = 0, 1, 2, 3
+STAGE_FIRST, STAGE_BACK, STAGE_CHAIN, STAGE_SETTLED, STAGE_REFUSED = 0, 1, 2, 3, 4
 STAGE_BITS = 4
-"""``stage``'s low bits; above them, for :data:`STAGE_SETTLED`, the proving pass (4 bits) and
-each pass's fate (2 bits a pass)."""
+"""``stage``'s low bits; above them, for :data:`STAGE_SETTLED` and :data:`STAGE_REFUSED`, the
+proving pass (4 bits) and each pass's fate (2 bits a pass)."""
 _NAMES = ("quad", "maxangle")
 
 
@@ -127,7 +130,14 @@ def frame_chain_kernel(xy_in, flux_in, cx, cy, f_px, mounts, cams, dist, rows, r
         area, agree_limit, max_candidates, checks_per_chunk, n_use, max_probes, max_checks, chain_static)
     if status == CHAIN_BACK:
         return STAGE_BACK, False, False, ints, floats
-    if settle_here and status == CHAIN_FOUND and members[at] == 0:
+    if status != CHAIN_FOUND:  # the hypotheses counted, and what became of each pass
+        code = STAGE_REFUSED
+        for i in range(len(ran)):
+            code |= ran[i] << (2 * STAGE_BITS + 2 * i)
+        counted = np.empty(1, np.int64)
+        counted[0] = trials
+        return code, False, False, counted, np.empty(0)
+    if settle_here and members[at] == 0:
         ok, used_deep, s_ints, s_floats = settle_kernel(vec, xy, flux, True, mounts, cams, dist, rows, row_off, order,
                                                         m_obs, m_cat, r, prob, n_trials, *settle_static.args)
         if ok:
@@ -174,16 +184,24 @@ class ChainOutcome(NamedTuple):
                            flux=self.flux)
 
 
+def _fates(stage: int, cs: ChainSetup, fate: int) -> list[str]:
+    """The methods of the passes whose fate in ``stage``'s upper bits is ``fate``, in order."""
+    return [_NAMES[cs.kinds[i]] for i in range(len(cs.kinds)) if (stage >> (2 * STAGE_BITS + 2 * i)) & 3 == fate]
+
+
 def settled_passes(stage: int, cs: ChainSetup) -> tuple[str, list[str]]:
     """A :data:`STAGE_SETTLED` call's proving method and the methods the chain ran, in order
     (``stage``'s upper bits)."""
-    at = (stage >> STAGE_BITS) & 15
-    tried = [_NAMES[cs.kinds[i]] for i in range(len(cs.kinds)) if (stage >> (2 * STAGE_BITS + 2 * i)) & 3 == RAN]
-    return _NAMES[cs.kinds[at]], tried
+    return _NAMES[cs.kinds[(stage >> STAGE_BITS) & 15]], _fates(stage, cs, RAN)
+
+
+def refused_chain(stage: int, ints: np.ndarray, cs: ChainSetup) -> Chain:
+    """A :data:`STAGE_REFUSED` call's :class:`~.fallback_pass.Chain` (no answer)."""
+    return Chain(None, None, _NAMES[cs.kinds[-1]], int(ints[0]), _fates(stage, cs, RAN), _fates(stage, cs, UNPROVABLE))
 
 
 def unpack_chain(ints: np.ndarray, floats: np.ndarray, cs: ChainSetup, n: int) -> ChainOutcome:
-    """:data:`STAGE_CHAIN`'s packed arrays of a frame of ``n`` stars, as :class:`ChainOutcome`."""
+    """:data:`STAGE_CHAIN`'s packed arrays of a frame of ``n`` stars (a proof), as :class:`ChainOutcome`."""
     status, at, n_trials, trials, n_ran, n_m = ints[:6].tolist()
     ran = ints[6:6 + n_ran].tolist()
     kinds = cs.kinds
@@ -194,13 +212,12 @@ def unpack_chain(ints: np.ndarray, floats: np.ndarray, cs: ChainSetup, n: int) -
     xy = floats[10:10 + 2 * n].reshape(n, 2)
     vec = floats[10 + 2 * n:10 + 5 * n].reshape(n, 3)
     flux = floats[10 + 5 * n:]
-    if at < 0:
-        return ChainOutcome(Chain(None, None, _NAMES[kinds[-1]], trials, tried, unprovable), order, xy, vec, flux)
     found = Verified(ints[i:i + n_m].copy(), ints[i + n_m:i + 2 * n_m].copy(), floats[1:10].reshape(3, 3).copy(),
                      float(floats[0]), int(n_trials))
     chain = Chain(found, cs.passes[at][0], _NAMES[kinds[at]], trials, tried, unprovable)
     return ChainOutcome(chain, order, xy, vec, flux)
 
 
-__all__ = ["FRAME_CHAIN", "STAGE_BACK", "STAGE_BITS", "STAGE_CHAIN", "STAGE_FIRST", "STAGE_SETTLED", "ChainOutcome",
-           "ChainSetup", "chain_setup", "frame_chain_kernel", "settled_passes", "unpack_chain"]
+__all__ = ["FRAME_CHAIN", "STAGE_BACK", "STAGE_BITS", "STAGE_CHAIN", "STAGE_FIRST", "STAGE_REFUSED", "STAGE_SETTLED",
+           "ChainOutcome", "ChainSetup", "chain_setup", "frame_chain_kernel", "refused_chain", "settled_passes",
+           "unpack_chain"]

@@ -28,11 +28,13 @@ from .frame_chain import (
     FRAME_CHAIN,
     STAGE_BACK,
     STAGE_CHAIN,
+    STAGE_REFUSED,
     STAGE_SETTLED,
     ChainOutcome,
     ChainSetup,
     chain_setup,
     frame_chain_kernel,
+    refused_chain,
     settled_passes,
     unpack_chain,
 )
@@ -338,15 +340,15 @@ def solve_rig(
                     used, ran = settled_passes(stage, cs)
                     return _stamped(solved_solution(ints, floats, used), ["quad", *ran], timings, t0, t2)
                 return _stamped(solved_solution(ints, floats), ["quad"], timings, t0, t2)
-            if cs is not None and stage == STAGE_CHAIN:
+            if cs is not None and stage & 15 == STAGE_REFUSED:  # refused with no observation made
+                refused = refused_chain(stage, ints, cs)
+                timings["vectors"], timings["identify"] = 0.0, (t2 - t0) * 1e3
+                timings["total"] = (time.perf_counter() - t0) * 1e3
+                sparse = isinstance(given, NavDatabaseSet) and 3 <= n <= SPARSE_ADVICE_STARS
+                return no_solution(method, ["quad", *refused.tried], refused.trials, t2 > t0 + options.timeout_ms / 1e3,
+                                   timings, refused.unprovable, n, sparse_advice((cam,)) if sparse else "")
+            if cs is not None and stage == STAGE_CHAIN:  # a proof to finish below, from these vectors
                 outcome = unpack_chain(ints, floats, cs, n)
-                if outcome.chain.found is None:  # refused with no observation made
-                    timings["vectors"], timings["identify"] = 0.0, (t2 - t0) * 1e3
-                    timings["total"] = (time.perf_counter() - t0) * 1e3
-                    sparse = isinstance(given, NavDatabaseSet) and 3 <= n <= SPARSE_ADVICE_STARS
-                    return no_solution(method, ["quad", *outcome.chain.tried], outcome.chain.trials,
-                                       t2 > t0 + options.timeout_ms / 1e3, timings, outcome.chain.unprovable, n,
-                                       sparse_advice((cam,)) if sparse else "")
                 fp_s = t2 - t0
             else:
                 fp, fp_s = unsolved(ints, floats, plan[0][0]), t2 - t0

@@ -21,16 +21,24 @@ def _same(a, b) -> None:
 
 
 def _counting(monkeypatch) -> list:
-    """What the chain did in the first pass's call from now on (one entry a frame it ran on)."""
+    """What the chain did in the first pass's call from now on, where the pipeline read it (a
+    refusal, or a proof the call did not finish): one :class:`~service.core.fallback_pass.Chain`
+    a frame."""
     seen = []
-    unpack = frame_chain.unpack_chain
+    unpack, refused = frame_chain.unpack_chain, frame_chain.refused_chain
 
-    def counted(*args):
+    def counted_proof(*args):
         got = unpack(*args)
+        seen.append(got.chain)
+        return got
+
+    def counted_refusal(*args):
+        got = refused(*args)
         seen.append(got)
         return got
 
-    monkeypatch.setattr(pipeline, "unpack_chain", counted)
+    monkeypatch.setattr(pipeline, "unpack_chain", counted_proof)
+    monkeypatch.setattr(pipeline, "refused_chain", counted_refusal)
     return seen
 
 
@@ -74,7 +82,7 @@ def test_random_points_are_refused_as_by_two_calls(monkeypatch, default_set_db) 
     seen = _counting(monkeypatch)
     frames = [random_points(p.camera, int(n), rng) for n in (5, 6, 7, 9, 12, 20, 30, 39) for _ in range(2)]
     _both(monkeypatch, default_set_db, frames, p.camera, SolveOptions(centroid_sigma_px=1.0, timeout_ms=495.0))
-    assert len(seen) == len(frames) // 2 and all(s.chain.found is None for s in seen)
+    assert len(seen) == len(frames) // 2 and all(s.found is None for s in seen)
 
 
 def test_a_spent_budget_is_counted_as_by_two_calls(monkeypatch, default_set_db) -> None:

@@ -12,7 +12,7 @@ from .camera import Camera
 from .methods import AUTO_ORDER
 from .methods.capability import FAILURE_HINTS, cannot_serve, refusal_message, serving
 from .navdb.reader import NavDatabase, NavDatabaseSet
-from .types import Centroids, NoSolutionReason, Solution, SolveStatus
+from .types import Centroids, NoSolutionReason, Solution, SolveStatus, refused_solution_of
 
 OUTSIDE_FACTOR = 2.0
 """A camera is outside a database (refused at once) when no member has both ``fov_min_deg /
@@ -162,9 +162,8 @@ def no_solution(method: str, tried: list[str], trials: int, late: bool, timings:
                        f"{trials} candidate attitude(s) checked, none proven beyond the coincidence bound")
     hint = f"; {FAILURE_HINTS[method]}" if method in FAILURE_HINTS else ""
     hint += f"; {advice}" if advice else ""
-    return Solution(SolveStatus.NO_SOLUTION, tried[-1] if tried else method, reason=reason,
-                    methods_tried=ran, message=f"{why} (methods tried: {', '.join(ran) or 'none'}){note}{hint}",
-                    timings_ms=timings)
+    return refused_solution_of(tried[-1] if tried else method, reason, ran,
+                               f"{why} (methods tried: {', '.join(ran) or 'none'}){note}{hint}", timings)
 
 
 __all__ = ["OUTSIDE_FACTOR", "SPARSE_ADVICE_STARS", "method_refusal", "no_solution", "refusal", "sparse_advice"]

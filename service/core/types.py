@@ -269,6 +269,28 @@ _SOLVED_DEFAULTS = tuple((_SOLUTION_SLOTS[f.name], f.default) for f in dataclass
                                            "timings_ms"})
 
 
+_REFUSED_FIELDS = ("status", "method", "reason", "methods_tried", "message", "timings_ms")
+_REFUSED_SETTERS = tuple(_SOLUTION_SLOTS[name] for name in _REFUSED_FIELDS)
+_REFUSED_DEFAULTS = tuple((_SOLUTION_SLOTS[f.name], f.default) for f in dataclasses.fields(Solution)
+                          if f.name not in _REFUSED_FIELDS)
+
+
+def refused_solution_of(method: str, reason: NoSolutionReason, methods_tried: tuple[str, ...], message: str,
+                        timings_ms: dict[str, float]) -> Solution:
+    """``Solution(SolveStatus.NO_SOLUTION, method, reason=..., methods_tried=..., message=...,
+    timings_ms=...)``, the other fields at their defaults, made through the slots as
+    :func:`solved_solution_of` makes a proof's (a searched frame's refusal: a quarter of seed
+    002's frames at 2 false stars). ``tests/core/test_types.py`` checks it equals the
+    dataclass's own."""
+    sol = object.__new__(Solution)
+    for setter, value in zip(_REFUSED_SETTERS, (SolveStatus.NO_SOLUTION, method, reason, methods_tried, message,
+                                                 timings_ms), strict=True):
+        setter(sol, value)
+    for setter, default in _REFUSED_DEFAULTS:
+        setter(sol, default)
+    return sol
+
+
 def solved_solution_of(method: str, quaternion: tuple[float, float, float, float], ra_deg: float, dec_deg: float,
                        roll_deg: float, stars: Sequence[StarMatch], rms_arcsec: float, false_match_probability: float,
                        attitude_sigma_arcsec: tuple[float, float, float]) -> Solution:

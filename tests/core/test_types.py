@@ -6,7 +6,15 @@ import pickle
 import numpy as np
 import pytest
 
-from service.core.types import MatchedStars, Solution, SolveStatus, StarMatch, solved_solution_of
+from service.core.types import (
+    MatchedStars,
+    NoSolutionReason,
+    Solution,
+    SolveStatus,
+    StarMatch,
+    refused_solution_of,
+    solved_solution_of,
+)
 
 
 def _columns() -> tuple:
@@ -70,6 +78,20 @@ def test_the_slot_made_solution_is_the_dataclass_s_own() -> None:
         assert getattr(fast, f.name) == getattr(slow, f.name), f.name
     assert fast == slow and fast.solved
     assert fast.timings_ms is not solved_solution_of("quad", **args).timings_ms  # a dict of its own
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fast.method = "other"  # type: ignore[misc]
+    assert fast.to_dict() == slow.to_dict()
+
+
+def test_the_slot_made_refusal_is_the_dataclass_s_own() -> None:
+    """``refused_solution_of`` sets every field, equal to the dataclass's ``__init__``, still frozen."""
+    args = dict(reason=NoSolutionReason.NOT_PROVEN, methods_tried=("quad", "maxangle"),
+                message="12 candidate attitude(s) checked, none proven", timings_ms={"total": 0.05})
+    fast = refused_solution_of("maxangle", **args)
+    slow = Solution(SolveStatus.NO_SOLUTION, "maxangle", **args)
+    for f in dataclasses.fields(Solution):
+        assert getattr(fast, f.name) == getattr(slow, f.name), f.name
+    assert fast == slow and not fast.solved
     with pytest.raises(dataclasses.FrozenInstanceError):
         fast.method = "other"  # type: ignore[misc]
     assert fast.to_dict() == slow.to_dict()

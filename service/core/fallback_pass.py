@@ -66,6 +66,8 @@ from .verify import (
 )
 
 KIND_QUAD, KIND_MAXANGLE = 0, 1
+KIND_NAMES = ("quad", "maxangle")
+"""The method of each kind of pass."""
 RAN, UNPROVABLE, SPENT = 1, 2, 3
 """What became of each pass: it ran; it was skipped because no answer of it could pass the
 bound (the pipeline's ``unprovable``); it was not started, the budget being spent."""
@@ -133,32 +135,43 @@ def fallbacks(obs: Observation, plan: list[tuple[NavDatabase, list[str]]], trial
     if deadline - time.perf_counter() < MIN_CLOCK_S:
         return None
     cam = obs.cameras[0]
-    scale = obs.pixel_scale_rad
-    radius = match_radius_px or max(2.5, 3.0 * sigma_px)
-    setup = _setup(plan, cam, float(radius), small, first_quad_only)
+    bounds = chain_bounds(cam, obs.pixel_scale_rad, sigma_px, match_radius_px, max_false_prob)
+    setup = _setup(plan, cam, bounds[1], small, first_quad_only)
     if setup is None:
         return None
     passes, kinds, members, static = setup
-    tol = (3.0 * math.sqrt(2.0) * sigma_px + 0.5) * scale
     n_tri = min(len(obs), max_stars)
     k = obs.kernel_arrays
     call = _CHAIN if plain(obs.vec, obs.xy) else chain_kernel  # (_entry: the entry point's argument types)
     status, at, m_obs, m_cat, r, prob, n_trials, trials_out, ran = call(
         obs.vec, obs.xy, k.mounts, k.cams, k.dist, k.rows, k.row_off, _image_probes(obs), kinds, members, int(trials),
-        int(few_trials), n_tri, _pattern_array(n_tri), _extension_array(n_tri, len(obs)), float(tol), float(radius),
-        float(scale),
-        float(max_false_prob), float(Verifier.strong_false_prob), int(Verifier.confirm_patterns),
-        int(Verifier.screen_stars), int(Verifier.min_matches), float(cam.width) * float(cam.height),
-        3.0 * radius * scale, MAX_CANDIDATES, CHECKS_PER_CHUNK, QUERY_STARS, MAX_PROBES, MAX_CHECKS, static)
+        int(few_trials), n_tri, _pattern_array(n_tri), _extension_array(n_tri, len(obs)), *bounds, static)
     if status == CHAIN_BACK:
         return None
-    names = ("quad", "maxangle")
-    tried = [names[kinds[i]] for i in range(len(passes)) if ran[i] == RAN]
-    unprovable = [names[kinds[i]] for i in range(len(passes)) if ran[i] == UNPROVABLE]
+    tried, unprovable = passes_by_fate(kinds, ran, RAN), passes_by_fate(kinds, ran, UNPROVABLE)
     if status != CHAIN_FOUND:
-        return Chain(None, None, names[kinds[-1]], int(trials_out), tried, unprovable)
+        return Chain(None, None, KIND_NAMES[kinds[-1]], int(trials_out), tried, unprovable)
     found = Verified(m_obs, m_cat, r, float(prob), int(n_trials))
-    return Chain(found, passes[at][0], names[kinds[at]], int(trials_out), tried, unprovable)
+    return Chain(found, passes[at][0], KIND_NAMES[kinds[at]], int(trials_out), tried, unprovable)
+
+
+def chain_bounds(cam: Any, scale: float, sigma_px: float, match_radius_px: float | None,
+                 max_false_prob: float) -> tuple[Any, ...]:
+    """:func:`chain_kernel`'s arguments from ``tol`` to ``max_checks`` for camera ``cam`` at pixel
+    scale ``scale`` (rad) and centroid error ``sigma_px``: the pattern tolerance (rad), the match
+    radius (px), the verifier's bounds and the searches' limits (``[1]`` is the radius)."""
+    radius = float(match_radius_px or max(2.5, 3.0 * sigma_px))
+    tol = (3.0 * math.sqrt(2.0) * sigma_px + 0.5) * scale
+    return (float(tol), radius, float(scale), float(max_false_prob), float(Verifier.strong_false_prob),
+            int(Verifier.confirm_patterns), int(Verifier.screen_stars), int(Verifier.min_matches),
+            float(cam.width) * float(cam.height), 3.0 * radius * scale, MAX_CANDIDATES, CHECKS_PER_CHUNK, QUERY_STARS,
+            MAX_PROBES, MAX_CHECKS)
+
+
+def passes_by_fate(kinds: np.ndarray, fates: Any, fate: int) -> list[str]:
+    """The methods of the passes ``kinds`` whose fate (``fates[i]``: :data:`RAN`, :data:`UNPROVABLE`
+    or :data:`SPENT`) is ``fate``, in order."""
+    return [KIND_NAMES[kinds[i]] for i in range(len(fates)) if fates[i] == fate]
 
 
 SETUP_CACHE_SIZE = 64

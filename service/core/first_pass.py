@@ -257,8 +257,13 @@ def _settle_args(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px: 
                  match_radius_px: float | None, max_false_prob: float) -> tuple[Any, ...]:
     """:func:`settle_kernel`'s arguments from ``star_vec`` on (the member's, the deepest's and the
     options'), kept per member as :func:`_static_args` keeps its own."""
-    key = (id(deepest), cam.diagonal_fov_deg, cam.pixel_scale_rad, sigma_px, match_radius_px, max_false_prob)
-    return _settle_kept(member, deepest, key)
+    return _settle_kept(member, deepest, _settle_key(deepest, cam, sigma_px, match_radius_px, max_false_prob))
+
+
+def _settle_key(deepest: NavDatabase, cam: Any, sigma_px: float, match_radius_px: float | None,
+                max_false_prob: float) -> tuple[Any, ...]:
+    """What :func:`_settle_args` depends on, as :func:`_settle_kept`'s key."""
+    return (id(deepest), cam.diagonal_fov_deg, cam.pixel_scale_rad, sigma_px, match_radius_px, max_false_prob)
 
 
 def _settle_kept(member: NavDatabase, deepest: NavDatabase, key: tuple[Any, ...]) -> tuple[Any, ...]:
@@ -286,8 +291,7 @@ def _settle_packed(member: NavDatabase, deepest: NavDatabase, cam: Any, sigma_px
                    match_radius_px: float | None, max_false_prob: float) -> Packed:
     """:func:`_settle_args` as one :class:`~.packed.Packed` (kept beside them), as
     :func:`packed_settle_kernel` takes them."""
-    key = (id(deepest), cam.diagonal_fov_deg, cam.pixel_scale_rad, sigma_px, match_radius_px, max_false_prob)
-    got = _settle_entry(member, deepest, key)
+    got = _settle_entry(member, deepest, _settle_key(deepest, cam, sigma_px, match_radius_px, max_false_prob))
     if got[2] is None:
         got[2] = pack(got[1])
     return got[2]

@@ -32,7 +32,6 @@ compares the two frame by frame).
 
 from __future__ import annotations
 
-import math
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -40,21 +39,31 @@ from numba import njit
 
 from ._entry import EntryCall
 from .camera import Camera, brightest_first
-from .fallback_pass import CHAIN_BACK, CHAIN_FOUND, RAN, UNPROVABLE, Chain, _setup, chain_kernel
+from .fallback_pass import (
+    CHAIN_BACK,
+    CHAIN_FOUND,
+    KIND_NAMES,
+    RAN,
+    UNPROVABLE,
+    Chain,
+    _setup,
+    chain_bounds,
+    chain_kernel,
+    passes_by_fate,
+)
 from .first_pass import _settle_packed, first_pass_kernel, settle_kernel
 from .match import frame_rows
-from .methods.maxangle import MAX_CANDIDATES, _extension_array, _pattern_array
-from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS
+from .methods.maxangle import _extension_array, _pattern_array
+from .methods.quad import QUERY_STARS
 from .methods.quad_kernel import STATUS_NONE
 from .navdb.reader import NavDatabase
 from .packed import Packed, pack
-from .verify import CHECKS_PER_CHUNK, Observation, Verified, Verifier
+from .verify import Observation, Verified
 
 STAGE_FIRST, STAGE_BACK, STAGE_CHAIN, STAGE_SETTLED, STAGE_REFUSED = 0, 1, 2, 3, 4
 STAGE_BITS = 4
 """``stage``'s low bits; above them, for :data:`STAGE_SETTLED` and :data:`STAGE_REFUSED`, the
 proving pass (4 bits) and each pass's fate (2 bits a pass)."""
-_NAMES = ("quad", "maxangle")
 
 
 class ChainSetup(NamedTuple):
@@ -85,18 +94,12 @@ def chain_setup(setup: Any, n: int, few_trials: int, first_quad_only: bool, buil
         return setup.chains.get(key)
     cam, options = setup.camera, setup.options
     sigma = float(options.centroid_sigma_px)
-    radius = float(options.match_radius_px or max(2.5, 3.0 * sigma))
-    few = n <= QUERY_STARS
-    got = _setup(setup.plan, cam, radius, few, first_quad_only)
+    bounds = chain_bounds(cam, float(cam.pixel_scale_rad), sigma, options.match_radius_px, options.max_false_prob)
+    got = _setup(setup.plan, cam, bounds[1], n <= QUERY_STARS, first_quad_only)
     cs = None
     if got is not None:
         passes, kinds, members, static = got
-        scale = float(cam.pixel_scale_rad)
-        tol = (3.0 * math.sqrt(2.0) * sigma + 0.5) * scale
-        head = pack((kinds, members, int(few_trials), float(tol), radius, scale, float(options.max_false_prob),
-                     float(Verifier.strong_false_prob), int(Verifier.confirm_patterns), int(Verifier.screen_stars),
-                     int(Verifier.min_matches), float(cam.width) * float(cam.height), 3.0 * radius * scale,
-                     MAX_CANDIDATES, CHECKS_PER_CHUNK, QUERY_STARS, MAX_PROBES, MAX_CHECKS))
+        head = pack((kinds, members, int(few_trials), *bounds))
         n_tri = min(n, int(options.max_stars))
         settle = _settle_packed(setup.plan[0][0], setup.deepest, cam, sigma, options.match_radius_px,
                                 float(options.max_false_prob))
@@ -186,18 +189,19 @@ class ChainOutcome(NamedTuple):
 
 def _fates(stage: int, cs: ChainSetup, fate: int) -> list[str]:
     """The methods of the passes whose fate in ``stage``'s upper bits is ``fate``, in order."""
-    return [_NAMES[cs.kinds[i]] for i in range(len(cs.kinds)) if (stage >> (2 * STAGE_BITS + 2 * i)) & 3 == fate]
+    fates = [(stage >> (2 * STAGE_BITS + 2 * i)) & 3 for i in range(len(cs.kinds))]
+    return passes_by_fate(cs.kinds, fates, fate)
 
 
 def settled_passes(stage: int, cs: ChainSetup) -> tuple[str, list[str]]:
     """A :data:`STAGE_SETTLED` call's proving method and the methods the chain ran, in order
     (``stage``'s upper bits)."""
-    return _NAMES[cs.kinds[(stage >> STAGE_BITS) & 15]], _fates(stage, cs, RAN)
+    return KIND_NAMES[cs.kinds[(stage >> STAGE_BITS) & 15]], _fates(stage, cs, RAN)
 
 
 def refused_chain(stage: int, ints: np.ndarray, cs: ChainSetup) -> Chain:
     """A :data:`STAGE_REFUSED` call's :class:`~.fallback_pass.Chain` (no answer)."""
-    return Chain(None, None, _NAMES[cs.kinds[-1]], int(ints[0]), _fates(stage, cs, RAN), _fates(stage, cs, UNPROVABLE))
+    return Chain(None, None, KIND_NAMES[cs.kinds[-1]], int(ints[0]), _fates(stage, cs, RAN), _fates(stage, cs, UNPROVABLE))
 
 
 def unpack_chain(ints: np.ndarray, floats: np.ndarray, cs: ChainSetup, n: int) -> ChainOutcome:
@@ -205,8 +209,7 @@ def unpack_chain(ints: np.ndarray, floats: np.ndarray, cs: ChainSetup, n: int) -
     status, at, n_trials, trials, n_ran, n_m = ints[:6].tolist()
     ran = ints[6:6 + n_ran].tolist()
     kinds = cs.kinds
-    tried = [_NAMES[kinds[i]] for i in range(n_ran) if ran[i] == RAN]
-    unprovable = [_NAMES[kinds[i]] for i in range(n_ran) if ran[i] == UNPROVABLE]
+    tried, unprovable = passes_by_fate(kinds, ran, RAN), passes_by_fate(kinds, ran, UNPROVABLE)
     i = 6 + n_ran
     order = ints[i + 2 * n_m:]
     xy = floats[10:10 + 2 * n].reshape(n, 2)
@@ -214,7 +217,7 @@ def unpack_chain(ints: np.ndarray, floats: np.ndarray, cs: ChainSetup, n: int) -
     flux = floats[10 + 5 * n:]
     found = Verified(ints[i:i + n_m].copy(), ints[i + n_m:i + 2 * n_m].copy(), floats[1:10].reshape(3, 3).copy(),
                      float(floats[0]), int(n_trials))
-    chain = Chain(found, cs.passes[at][0], _NAMES[kinds[at]], trials, tried, unprovable)
+    chain = Chain(found, cs.passes[at][0], KIND_NAMES[kinds[at]], trials, tried, unprovable)
     return ChainOutcome(chain, order, xy, vec, flux)
 
 

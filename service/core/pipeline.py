@@ -354,7 +354,7 @@ def solve_rig(
                 fp, fp_s = unsolved(ints, floats, plan[0][0]), t2 - t0
                 chain_back = cs is not None and stage == STAGE_BACK
                 if cs is None:  # the chain's arguments for this camera's later frames of this size
-                    _frame_chain(setup, n, method, options, None)
+                    _frame_chain(setup, n, method, options, None, build=True)
     obs = _observation(frames, mountings) if outcome is None else outcome.observation(frames[0][1], mountings)
     if setup is not None:
         obs.__dict__["_image_probes"] = setup.probes
@@ -530,12 +530,12 @@ def _first_sight(db: NavDatabase | NavDatabaseSet, camera: Camera, method: str, 
     return setup
 
 
-def _frame_chain(setup: CameraSetup, n: int, method: str, options: SolveOptions, t0: float | None
-                 ) -> ChainSetup | None:
+def _frame_chain(setup: CameraSetup, n: int, method: str, options: SolveOptions, t0: float | None,
+                 build: bool = False) -> ChainSetup | None:
     """The chain's arguments where the pipeline would run it after the first pass's
-    exhaustive miss (:mod:`.frame_chain`; a frame of ``n`` stars, its clock started at
-    ``t0``), if the set-up keeps them, else None (the first pass alone; the rest as before).
-    ``t0`` None: make them (after such a miss) and return them."""
+    exhaustive miss (:mod:`.frame_chain`; a frame of ``n`` stars, its clock started at ``t0``,
+    None: no clock to check), if the set-up keeps them, else None (the first pass alone; the
+    rest as before). ``build``: make them if not kept (after such a miss)."""
     if not (FRAME_CHAIN_CALL and COMPILED_FALLBACKS and options.retry_sigma_factor <= 1):
         return None
     few = n <= QUERY_STARS
@@ -544,7 +544,7 @@ def _frame_chain(setup: CameraSetup, n: int, method: str, options: SolveOptions,
     if t0 is not None and t0 + options.timeout_ms / 1e3 - time.perf_counter() < MIN_CLOCK_S + FIRST_PASS_CLOCK_S:
         return None  # (the chain does not look at the clock: fallback_pass.MIN_CLOCK_S)
     return chain_setup(setup, n, FEW_STARS_MAX_TRIALS if few else MANY_STARS_MAX_TRIALS,
-                       method == "auto" and n <= FIRST_QUAD_ONLY_STARS, build=t0 is None)
+                       method == "auto" and n <= FIRST_QUAD_ONLY_STARS, build=build)
 
 
 def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: list[np.ndarray]) -> Observation:

@@ -102,8 +102,7 @@ def test_a_chain_that_hands_the_frame_back_leaves_it_to_the_general_loop(monkeyp
     the chain hands the frame back, and the general loop answers it as after two calls."""
     from service.core import fallback_pass
 
-    monkeypatch.setattr(frame_chain, "MAX_PROBES", -1)
-    monkeypatch.setattr(fallback_pass, "MAX_PROBES", -1)
+    monkeypatch.setattr(fallback_pass, "MAX_PROBES", -1)  # (fallback_pass.chain_bounds: both paths)
     p = PRESETS["seed002"]
     config = SimConfig(mag_limit=p.mag_limit, centroid_noise_px=0.5, false_stars=2)
     frames = [f.centroids for f in simulate_frames(p.camera, 300, config, rng=54) if len(f.centroids) >= 7][:30]
@@ -128,7 +127,7 @@ def test_a_frame_near_its_time_limit_makes_two_calls(default_set_db) -> None:
     solve(frame, p.camera, default_set_db, options=fresh)
     setup = kept_setup(default_set_db, p.camera, "auto", fresh)
     assert pipeline._frame_chain(setup, 6, "auto", fresh, time.perf_counter()) is None  # not made before a miss
-    assert pipeline._frame_chain(setup, 6, "auto", fresh, None) is not None  # made (after a miss)
+    assert pipeline._frame_chain(setup, 6, "auto", fresh, None, build=True) is not None  # made (after a miss)
     assert pipeline._frame_chain(setup, 6, "auto", fresh, time.perf_counter()) is not None  # then kept
 
 

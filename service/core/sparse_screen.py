@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 
 from .methods._table_join import triangle_table
-from .methods.maxangle_index import box_cells
+from .methods.maxangle_box import box_cells
 from .methods.quad_build import row_angle
 from .navdb.reader import NavDatabase
 
@@ -54,7 +54,7 @@ def triangle_match_counts(key: np.ndarray, cell_start: np.ndarray, b_tab: np.nda
     """For each triangle of the stars ``obs_vec`` ``(N, 3)`` (unit vectors, any frame; the
     triangles ``(i, j, k)``, ``i < j < k``, in lexicographic order), the number of catalogue
     triples with the same handedness whose three sides lie within ``tol`` (rad) of its own, read
-    from a ``cells`` triangle table (:func:`~.methods.maxangle_index.box_cells`); -1 where the
+    from a ``cells`` triangle table (:func:`~.methods.maxangle_box.box_cells`); -1 where the
     table may not hold them all (a side beyond its reach)."""
     n = len(obs_vec)
     out = np.full(n * (n - 1) * (n - 2) // 6, -1, np.int64)

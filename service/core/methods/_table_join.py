@@ -4,7 +4,7 @@
 windows of the pair table (:func:`~._pairs.join_windows`): every pair within ``w`` of each side,
 ~1,000-15,000 rows a window on the default set's ``sparse`` member, ~35-450 us a join. A table of
 every triangle of the member's stars holds the same triples, read by cell
-(:func:`~.maxangle_index.box_cells`, ~10-80 us): the member's ``maxangle`` table when it is made
+(:func:`~.maxangle_box.box_cells`, ~10-80 us): the member's ``maxangle`` table when it is made
 of every star (``cells`` layout), or ``triangle``'s own box table (build parameter
 ``box_d_max_deg``). Where the triangle could reach past the table's limits the callers join.
 
@@ -24,7 +24,8 @@ import numpy as np
 from ..navdb.reader import NavDatabase
 from ..star_index import star_vec64
 from .maxangle import PATTERN_PARAMS, THETA_MAX_USABLE, MaxAngle
-from .maxangle_index import box_cells, bucket_starts
+from .maxangle_box import box_cells
+from .maxangle_index import bucket_starts
 
 _THETA_MAX_DEG = math.degrees(THETA_MAX_USABLE)
 """The ``theta_max`` limit of a table built before its ``theta_max_deg`` was recorded."""
@@ -33,7 +34,7 @@ BOX_CELL_DEG = 3.5 / 256
 """Cell side (deg) of a box table's ``(b, c)`` grid: the default set's ``maxangle`` cells."""
 
 TableArgs = tuple[Any, ...]
-""":func:`~.maxangle_index.box_cells`'s table arguments: ``key, cell_start, b, c, ids, star_vec``,
+""":func:`~.maxangle_box.box_cells`'s table arguments: ``key, cell_start, b, c, ids, star_vec``,
 then ``n_cells, b_scale, d_max, xi, theta_max``."""
 
 
@@ -53,7 +54,7 @@ def build_box_table(stars: Any, config: Any, d_max_deg: float, progress: Any) ->
 def triangle_table(db: NavDatabase) -> TableArgs | None:
     """The triangle table of ``db`` that reaches furthest (``triangle``'s own box table, or a
     ``maxangle`` table in the ``cells`` layout made of every star of ``db``), as
-    :func:`~.maxangle_index.box_cells` takes it; None without one. Kept on ``db``."""
+    :func:`~.maxangle_box.box_cells` takes it; None without one. Kept on ``db``."""
     cache = db.__dict__.setdefault("_cache", {})
     if "triangle_table" not in cache:
         cache["triangle_table"] = _find_table(db)

@@ -13,7 +13,7 @@ from service.core.geometry import pairwise_angles
 from service.core.methods import get_matcher
 from service.core.methods._pairs import join_windows, same_handedness
 from service.core.methods._table_join import table_join, triangle_table
-from service.core.methods.maxangle_index import box_cells
+from service.core.methods.maxangle_box import box_cells
 from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
 
 

@@ -18,6 +18,7 @@ from .fallback_pass import fallbacks
 from .first_pass import deeper_arrays, settle
 from .hidden import hidden_neighbours
 from .methods import get_matcher
+from .methods._table_join import table_join
 from .methods.quad import QUERY_STARS
 from .methods.rig_proof import THIRD_STAR_REACH_DEG, cross_triples, sky_limits
 from .navdb.reader import NavDatabase, NavDatabaseSet
@@ -196,8 +197,13 @@ def _screens(members: list[NavDatabase]) -> None:
         camera = Camera.from_fov(float(member.manifest["fov_min_deg"]), 1024, 1024)
         frame = own_frames(member, camera, n_tries=1)[0]
         warm_up_screens(member, camera, frame)
-        if "triangle" in member.methods:  # its density box read from a triangle table (box_cells)
-            get_matcher(member, "triangle").box_triples(np.asarray(member.stars.vec[:3], np.float64), 1e-4)
+        if "triangle" in member.methods:  # its density box and candidates read from a triangle table
+            tri = get_matcher(member, "triangle")
+            tri.box_triples(np.asarray(member.stars.vec[:3], np.float64), 1e-4)
+            tri.triples(np.asarray(member.stars.vec[:3], np.float64), 1e-4)  # (pivot_join)
+        if "pyramid" in member.methods and get_matcher(member, "pyramid").table is not None:
+            v = np.asarray(member.stars.vec[:3], np.float64)
+            table_join(get_matcher(member, "pyramid").table, v, 0.01, 0.01, 0.01, 1e-4)
         # the deeper recheck's screen (could_pair_more_deeper), which only an answer found past the
         # first pass reaches (its first use in a request loaded it from numba's cache)
         could_pair_more_deeper(_observation([(frame, camera, None)], _ONE_CAMERA), member,

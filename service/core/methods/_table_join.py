@@ -20,11 +20,13 @@ import math
 from typing import Any
 
 import numpy as np
+from numba import njit
 
+from ..geometry import pairwise_angles_kernel
 from ..navdb.reader import NavDatabase
 from ..star_index import star_vec64
 from .maxangle import PATTERN_PARAMS, THETA_MAX_USABLE, MaxAngle
-from .maxangle_box import box_cells
+from .maxangle_box import _pair_angle, box_cells
 from .maxangle_index import bucket_starts
 
 _THETA_MAX_DEG = math.degrees(THETA_MAX_USABLE)
@@ -105,15 +107,74 @@ def table_join(table: TableArgs, v: np.ndarray, s_ab: float, s_ac: float, s_bc: 
     """:func:`table_triples` in the order of :func:`~._pairs.join_windows` (then
     :func:`~._pairs.same_handedness`) on the same windows: by ``a``, then the ``a-b`` pair's
     orientation in the pair table (``a`` its smaller row first) and angle, then the ``a-c``
-    pair's (the table's rows are sorted by angle, as the pair table built them)."""
-    out = table_triples(table, v, s_ab, s_ac, s_bc, w)
-    if out is None or len(out) < 2:
-        return out
-    vec = table[5]
-    a, b, c = out[:, 0], out[:, 1], out[:, 2]
-    return out[np.lexsort((_angle(vec, a, c), a > c, _angle(vec, a, b), a > b, a))]
+    pair's (the table's rows are sorted by angle, as the pair table built them). One compiled
+    call (:func:`table_join_kernel`)."""
+    ok, out = table_join_kernel(*table[:6], np.array(v, dtype=np.float64), float(s_ab), float(s_ac), float(s_bc),
+                                float(w), *table[6:])
+    return out if ok else None
 
 
-def _angle(vec: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """Pair angles (rad) as the pair table computed them (:func:`~._pairs.build_pair_table`)."""
-    return 2 * np.arcsin(np.clip(np.linalg.norm(vec[i] - vec[j], axis=1) / 2, 0, 1))
+def pivot_join(table: TableArgs, v: np.ndarray, w: float) -> np.ndarray | None:
+    """The join's triples of the observed triangle ``v`` (3, 3) at ``w`` (rad) pivoted as
+    :meth:`~.triangle.TriangleMatcher.triples` pivots them (on the vertex opposite the shortest
+    side, the first such), in its order and with the columns in ``v``'s vertex order; None where
+    the table may not hold them all. One compiled call (:func:`pivot_join_kernel`)."""
+    ok, out = pivot_join_kernel(*table[:6], np.array(v, dtype=np.float64), float(w), *table[6:])
+    return out if ok else None
+
+
+@njit(cache=True, nogil=True)
+def table_join_kernel(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab: np.ndarray, ids: np.ndarray,
+                      star_vec: np.ndarray, v: np.ndarray, s_ab: float, s_ac: float, s_bc: float, w: float,
+                      n_cells: int, b_scale: float, d_max: float, xi: float,
+                      theta_max: float) -> tuple[bool, np.ndarray]:
+    """:func:`table_join`: ``(ok, triples)``, ``ok`` False where the table may not hold them all."""
+    ok, out = box_cells(key, cell_start, b_tab, c_tab, ids, star_vec, v, s_ab, s_ac, s_bc, w, n_cells, b_scale,
+                        d_max, xi, theta_max)
+    if not ok or len(out) < 2:
+        return ok, out
+    return True, out[_join_order(star_vec, out)]
+
+
+@njit(cache=True, nogil=True)
+def pivot_join_kernel(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab: np.ndarray, ids: np.ndarray,
+                      star_vec: np.ndarray, v: np.ndarray, w: float, n_cells: int, b_scale: float, d_max: float,
+                      xi: float, theta_max: float) -> tuple[bool, np.ndarray]:
+    """:func:`pivot_join`: ``(ok, triples)``."""
+    d = pairwise_angles_kernel(v)
+    p, shortest = 0, d[1, 2]  # the vertex opposite the shortest side, the first of equals (tuple.index(min))
+    if d[0, 2] < shortest:
+        p, shortest = 1, d[0, 2]
+    if d[0, 1] < shortest:
+        p = 2
+    q, r = (1, 2) if p == 0 else ((0, 2) if p == 1 else (0, 1))
+    vp = np.empty((3, 3))
+    for a in range(3):
+        vp[0, a], vp[1, a], vp[2, a] = v[p, a], v[q, a], v[r, a]
+    ok, got = table_join_kernel(key, cell_start, b_tab, c_tab, ids, star_vec, vp, d[p, q], d[p, r], d[q, r], w,
+                                n_cells, b_scale, d_max, xi, theta_max)
+    if not ok:
+        return False, got
+    out = np.empty_like(got)
+    for i in range(len(got)):
+        out[i, p], out[i, q], out[i, r] = got[i, 0], got[i, 1], got[i, 2]
+    return True, out
+
+
+@njit(cache=True, nogil=True)
+def _join_order(star_vec: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """The permutation of ``out``'s rows ``(a, b, c)`` that ``np.lexsort((angle(a, c), a > c,
+    angle(a, b), a > b, a))`` gives: stable sorts from the last key to the first."""
+    n = len(out)
+    keys = np.empty((5, n))
+    for i in range(n):
+        a, b, c = out[i, 0], out[i, 1], out[i, 2]
+        keys[0, i] = _pair_angle(star_vec[a], star_vec[c])
+        keys[1, i] = 1.0 if a > c else 0.0
+        keys[2, i] = _pair_angle(star_vec[a], star_vec[b])
+        keys[3, i] = 1.0 if a > b else 0.0
+        keys[4, i] = a
+    order = np.arange(n)
+    for k in range(5):
+        order = order[np.argsort(keys[k][order], kind="mergesort")]
+    return order

@@ -55,7 +55,7 @@ from ._pairs import (
     same_handedness,
     upper_pairs,
 )
-from ._table_join import build_box_table, table_join, table_triples, triangle_table
+from ._table_join import build_box_table, pivot_join, table_triples, triangle_table
 from .base import Progress, SolveContext
 
 MAX_CANDIDATES = 64
@@ -179,6 +179,10 @@ class TriangleMatcher:
         same triples in another order, found faster in wide windows: the pivot's sides are the
         two shorter ones, whose windows hold the fewest pairs (a window's pairs grow with its
         angle), and the join's outer loop walks the shortest."""
+        if self.box_table is not None and not pivot_longest:  # the join's triples, in its order, looked up
+            got = pivot_join(self.box_table, v, eps)  # (the pivot below, in one compiled call)
+            if got is not None:
+                return got
         d = pairwise_angles(v)
         opposite = (d[1, 2], d[0, 2], d[0, 1])
         # the vertex opposite the shortest (longest) side, np.argmin's (argmax's) first
@@ -187,12 +191,6 @@ class TriangleMatcher:
         if pivot_longest and d[p, q] > d[p, r]:
             q, r = r, q  # the outer loop walks the a-b window: the shortest side's, the fewest pairs
         sides = np.array([d[p, q], d[p, r], d[q, r]])
-        if self.box_table is not None and not pivot_longest:  # the join's triples, in its order, looked up
-            got = table_join(self.box_table, v[[p, q, r]], sides[0], sides[1], sides[2], eps)
-            if got is not None:
-                out = np.empty_like(got)
-                out[:, [p, q, r]] = got
-                return out
         s, e = self.windows(sides - eps, sides + eps)
         cand = join_windows(self.pairs, int(s[0]), int(e[0]), int(s[1]), int(e[1]), int(s[2]), int(e[2]),
                             self.n_stars)

@@ -12,8 +12,9 @@ import pytest
 from service.core.geometry import pairwise_angles
 from service.core.methods import get_matcher
 from service.core.methods._pairs import join_windows, same_handedness
-from service.core.methods._table_join import table_join, triangle_table
+from service.core.methods._table_join import pivot_join, table_join, triangle_table
 from service.core.methods.maxangle_box import box_cells
+from service.core.methods.triangle import TriangleMatcher
 from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
 
 
@@ -66,6 +67,28 @@ def test_table_join_gives_the_join_in_its_order(default_set_db, name: str, reach
         # a pivot star met in both orientations of its a-b pair: the order needs the orientation
         several += any(np.any(a[a == x] > b[a == x]) and np.any(a[a == x] < b[a == x]) for x in set(a.tolist()))
     assert several >= 5  # the order is tested, not only single answers
+
+
+def test_pivot_join_gives_triangles_candidates(default_set_db) -> None:
+    """``pivot_join`` (``triangle``'s candidates, pivot and columns in one compiled call) gives
+    what the pair-window join gives through ``TriangleMatcher.triples``, order included, on the
+    member that holds ``triangle`` (``sparse``)."""
+    member = default_set_db.members["sparse"]
+    table = triangle_table(member)
+    joiner = TriangleMatcher(member)
+    joiner.box_table = None  # the join itself
+    looked_up, several = 0, 0
+    for v, rng in _triangles(member, 3.3, 1e-5, 17):
+        if looked_up >= 100:
+            break
+        w = float(rng.choice([2e-5, 2e-4, 1e-3]))
+        got = pivot_join(table, v, w)
+        if got is None:
+            continue
+        looked_up += 1
+        np.testing.assert_array_equal(got, joiner.triples(v, w).reshape(-1, 3))
+        several += len(got) >= 2
+    assert several >= 10
 
 
 def test_members_without_a_triangle_table_join(default_set_db) -> None:

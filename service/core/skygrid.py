@@ -199,3 +199,26 @@ def collect_within(px: float, py: float, pz: float, chord: float, cell: float, n
                         out[n] = row
                         n += 1
     return n
+
+
+def fields_within(grid: SkyGrid, points: FloatArray, chords: FloatArray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of the stars within ``chords[c]`` (unit-vector distance) of ``points[c]`` ``(C, 3)``,
+    each point's concatenated in turn, with offsets ``(C + 1,)``: one compiled call (a k-d tree's
+    ball queries and the lists' conversion took ~30 us a frame in the verifier)."""
+    return _fields_within(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(chords, np.float64),
+                          grid.cell, grid.n_side, grid.keys, grid.starts, grid.stars, grid.vec, grid.columns)
+
+
+@njit(cache=True, nogil=True)
+def _fields_within(points: np.ndarray, chords: np.ndarray, cell: float, n_side: int, keys: np.ndarray,
+                   starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
+                   columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fields_within`."""
+    n_c = len(points)
+    off = np.zeros(n_c + 1, np.int64)
+    buf = np.empty(n_c * len(vec), np.int64)
+    for c in range(n_c):
+        n = collect_within(points[c, 0], points[c, 1], points[c, 2], chords[c], cell, n_side, keys, starts, stars,
+                           vec, columns, buf[off[c]:])
+        off[c + 1] = off[c] + n
+    return buf[:off[n_c]].copy(), off

@@ -211,3 +211,27 @@ def test_density_box_joins_without_a_usable_table(db: NavDatabase) -> None:
     assert tri.box_table is None
     v = np.asarray(db.stars.vec)[:3]
     np.testing.assert_array_equal(tri.box_triples(v, 1e-3), tri.triples(v, 1e-3, pivot_longest=True))
+
+
+def test_selective_order_is_the_pair_windows_order(default_set_db) -> None:
+    """The compiled order of a frame's triangles (most distinctive first, ``_selective_order``)
+    is the one the pair windows' counts give in numpy, ties kept in ``combinations`` order."""
+    from itertools import combinations
+
+    from service.core.geometry import pairwise_angles
+    from service.core.methods.triangle import _selective_order
+
+    member = default_set_db.members["sparse"]
+    angles = np.asarray(member.tables["triangle"]["angles"])
+    vec = np.asarray(member.stars.vec)
+    rng = np.random.default_rng(4)
+    for n, eps in ((3, 1e-4), (4, 8e-5), (5, 3e-4), (7, 1e-3)):
+        c = vec[int(rng.integers(len(vec)))]
+        near = np.flatnonzero(vec @ c > math.cos(math.radians(3.0)))
+        d = pairwise_angles(vec[rng.choice(near, n, replace=False)])
+        count = np.ones((n, n))
+        for i, j in combinations(range(n), 2):
+            s, e = np.searchsorted(angles, d[i, j] - eps, "left"), np.searchsorted(angles, d[i, j] + eps, "right")
+            count[i, j] = count[j, i] = max(e - s, 1)
+        cost = [count[i, j] * count[i, k] * count[j, k] for i, j, k in combinations(range(n), 3)]
+        assert _selective_order(angles, d, n, eps).tolist() == np.argsort(cost, kind="stable").tolist()

@@ -16,6 +16,7 @@ from .camera import Camera
 from .deeper import could_pair_more_deeper
 from .fallback_pass import fallbacks
 from .first_pass import deeper_arrays, settle
+from .geometry import pairwise_angles
 from .hidden import hidden_neighbours
 from .methods import get_matcher
 from .methods._table_join import table_join
@@ -201,6 +202,7 @@ def _screens(members: list[NavDatabase]) -> None:
             tri = get_matcher(member, "triangle")
             tri.box_triples(np.asarray(member.stars.vec[:3], np.float64), 1e-4)
             tri.triples(np.asarray(member.stars.vec[:3], np.float64), 1e-4)  # (pivot_join)
+            tri._triangle_order(pairwise_angles(np.asarray(member.stars.vec[:4], np.float64)), 4, 1e-4)
         if "pyramid" in member.methods and get_matcher(member, "pyramid").table is not None:
             v = np.asarray(member.stars.vec[:3], np.float64)
             table_join(get_matcher(member, "pyramid").table, v, 0.01, 0.01, 0.01, 1e-4)

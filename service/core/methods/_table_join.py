@@ -108,9 +108,9 @@ def table_join(table: TableArgs, v: np.ndarray, s_ab: float, s_ac: float, s_bc: 
     :func:`~._pairs.same_handedness`) on the same windows: by ``a``, then the ``a-b`` pair's
     orientation in the pair table (``a`` its smaller row first) and angle, then the ``a-c``
     pair's (the table's rows are sorted by angle, as the pair table built them). One compiled
-    call (:func:`table_join_kernel`)."""
-    ok, out = table_join_kernel(*table[:6], np.array(v, dtype=np.float64), float(s_ab), float(s_ac), float(s_bc),
-                                float(w), *table[6:])
+    call (:func:`join_kernel`)."""
+    ok, out = join_kernel(*table[:6], np.array(v, dtype=np.float64), float(s_ab), float(s_ac), float(s_bc),
+                          float(w), False, *table[6:])
     return out if ok else None
 
 
@@ -118,43 +118,39 @@ def pivot_join(table: TableArgs, v: np.ndarray, w: float) -> np.ndarray | None:
     """The join's triples of the observed triangle ``v`` (3, 3) at ``w`` (rad) pivoted as
     :meth:`~.triangle.TriangleMatcher.triples` pivots them (on the vertex opposite the shortest
     side, the first such), in its order and with the columns in ``v``'s vertex order; None where
-    the table may not hold them all. One compiled call (:func:`pivot_join_kernel`)."""
-    ok, out = pivot_join_kernel(*table[:6], np.array(v, dtype=np.float64), float(w), *table[6:])
+    the table may not hold them all. One compiled call (:func:`join_kernel`)."""
+    ok, out = join_kernel(*table[:6], np.array(v, dtype=np.float64), 0.0, 0.0, 0.0, float(w), True, *table[6:])
     return out if ok else None
 
 
 @njit(cache=True, nogil=True)
-def table_join_kernel(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab: np.ndarray, ids: np.ndarray,
-                      star_vec: np.ndarray, v: np.ndarray, s_ab: float, s_ac: float, s_bc: float, w: float,
-                      n_cells: int, b_scale: float, d_max: float, xi: float,
-                      theta_max: float) -> tuple[bool, np.ndarray]:
-    """:func:`table_join`: ``(ok, triples)``, ``ok`` False where the table may not hold them all."""
-    ok, out = box_cells(key, cell_start, b_tab, c_tab, ids, star_vec, v, s_ab, s_ac, s_bc, w, n_cells, b_scale,
-                        d_max, xi, theta_max)
-    if not ok or len(out) < 2:
-        return ok, out
-    return True, out[_join_order(star_vec, out)]
-
-
-@njit(cache=True, nogil=True)
-def pivot_join_kernel(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab: np.ndarray, ids: np.ndarray,
-                      star_vec: np.ndarray, v: np.ndarray, w: float, n_cells: int, b_scale: float, d_max: float,
-                      xi: float, theta_max: float) -> tuple[bool, np.ndarray]:
-    """:func:`pivot_join`: ``(ok, triples)``."""
-    d = pairwise_angles_kernel(v)
-    p, shortest = 0, d[1, 2]  # the vertex opposite the shortest side, the first of equals (tuple.index(min))
-    if d[0, 2] < shortest:
-        p, shortest = 1, d[0, 2]
-    if d[0, 1] < shortest:
-        p = 2
-    q, r = (1, 2) if p == 0 else ((0, 2) if p == 1 else (0, 1))
+def join_kernel(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab: np.ndarray, ids: np.ndarray,
+                star_vec: np.ndarray, v: np.ndarray, s_ab: float, s_ac: float, s_bc: float, w: float, pivot: bool,
+                n_cells: int, b_scale: float, d_max: float, xi: float, theta_max: float) -> tuple[bool, np.ndarray]:
+    """:func:`table_join` of ``v`` with sides ``s_ab``, ``s_ac``, ``s_bc``, or with ``pivot``
+    :func:`pivot_join` of ``v`` (the sides its own): ``(ok, triples)``, ``ok`` False where the
+    table may not hold them all. (One kernel for both: the table's read is compiled once.)"""
+    p, q, r = 0, 1, 2
+    if pivot:
+        d = pairwise_angles_kernel(v)
+        shortest = d[1, 2]  # the vertex opposite the shortest side, the first of equals (tuple.index(min))
+        if d[0, 2] < shortest:
+            p, shortest = 1, d[0, 2]
+        if d[0, 1] < shortest:
+            p = 2
+        q, r = (1, 2) if p == 0 else ((0, 2) if p == 1 else (0, 1))
+        s_ab, s_ac, s_bc = d[p, q], d[p, r], d[q, r]
     vp = np.empty((3, 3))
     for a in range(3):
         vp[0, a], vp[1, a], vp[2, a] = v[p, a], v[q, a], v[r, a]
-    ok, got = table_join_kernel(key, cell_start, b_tab, c_tab, ids, star_vec, vp, d[p, q], d[p, r], d[q, r], w,
-                                n_cells, b_scale, d_max, xi, theta_max)
+    ok, got = box_cells(key, cell_start, b_tab, c_tab, ids, star_vec, vp, s_ab, s_ac, s_bc, w, n_cells, b_scale,
+                        d_max, xi, theta_max)
     if not ok:
         return False, got
+    if len(got) >= 2:
+        got = got[_join_order(star_vec, got)]
+    if not pivot:
+        return True, got
     out = np.empty_like(got)
     for i in range(len(got)):
         out[i, p], out[i, q], out[i, r] = got[i, 0], got[i, 1], got[i, 2]

@@ -28,10 +28,10 @@ def tally(frames: Sequence[SimFrame], camera: Camera, db: NavDatabase, method: s
 
 
 def assert_refuses_random_points(camera: Camera, db: NavDatabase, method: str, *, seed: int,
-                                 options: SolveOptions = DEFAULT_OPTIONS, n: int = 84) -> None:
-    """``n`` frames of 3-30 uniform random points (each count three times; five until session 25,
-    when CI's ten minutes ran short): every one must be ``no_solution``. ``bench.bench_wrong``
-    counts wrong answers at scale."""
+                                 options: SolveOptions = DEFAULT_OPTIONS, n: int = 56) -> None:
+    """``n`` frames of 3-30 uniform random points (each count twice; five times until session 25
+    and three until session 36, when CI's ten minutes ran short): every one must be
+    ``no_solution``. ``bench.bench_wrong`` counts wrong answers at scale."""
     for i in range(n):
         pts = random_points(camera, 3 + i % 28, rng=seed + i)
         assert not solve(pts, camera, db, method=method, options=options).solved, f"random frame {i} solved"

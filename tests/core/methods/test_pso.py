@@ -195,7 +195,7 @@ def test_identifies_99_percent_with_no_wrong_answer(db: NavDatabase) -> None:
 
 @pytest.mark.slow
 def test_random_points_never_solve(db: NavDatabase) -> None:
-    for i in range(50):  # 20-119 points (~0.1 s each: the swarm's tours run out; 100 until session 25)
+    for i in range(34):  # 20-119 points (~0.1 s each: the swarm's tours run out; 100 until session 25, 50 until 36)
         pts = random_points(CAMERA, 20 + (7 * i) % 100, rng=i)
         assert not solve(pts, CAMERA, db, method="pso", options=OPTIONS).solved
 

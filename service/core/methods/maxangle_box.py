@@ -128,11 +128,8 @@ def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab:
     # record's vertex opposite its shortest side, q2, to the observed vertex opposite the
     # shortest, and so on): its stars decide in that order alone (the loop over six finds no other)
     single = a0 - b0 > 2 * (w + m) and b0 - c0 > 2 * (w + m)
-    o0 = 2 - _rank(s12, s01, s02)  # the record vertex each observed vertex maps to
+    o0 = 2 - _rank(s12, s01, s02)  # the record vertex observed vertices 0 and 1 map to (so is vertex 2's)
     o1 = 2 - _rank(s02, s01, s12)
-    o2 = 2 - _rank(s01, s02, s12)
-    single_even = (o0 == 0 and o1 == 1) or (o0 == 1 and o1 == 2) or (o0 == 2 and o1 == 0)
-    o01, o02, o12 = o0 + o1 - 1, o0 + o2 - 1, o1 + o2 - 1
     out01, in01 = _chord2_window(lo01, hi01)
     out02, in02 = _chord2_window(lo02, hi02)
     out12, in12 = _chord2_window(lo12, hi12)
@@ -213,8 +210,7 @@ def box_cells(key: np.ndarray, cell_start: np.ndarray, b_tab: np.ndarray, c_tab:
                         and not _in_windows(star_vec, q0, q1, q2, j01, j02, j12, lo01, hi01, lo02, hi02, lo12,
                                             hi12):
                     continue
-                q = (q0, q1, q2)
-                out = _push(out, n, q[i0], q[i1], q[i2])
+                out = _push(out, n, _of(i0, q0, q1, q2), _of(i1, q0, q1, q2), _of(i2, q0, q1, q2))
                 n += 1
     return True, out[:n].copy()
 

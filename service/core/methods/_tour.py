@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..types import FloatArray, IntArray
+from ._tour_kernel import held_karp, local_search, nearest_neighbour
 
 EXACT_MAX_NODES = 10
 """Tours of up to this many nodes (centre included) are solved exactly by Held-Karp."""
@@ -79,11 +80,10 @@ def best_tours(
     b = np.arange(bsz)[:, None, None]
     ds = d[b, perm[:, :, None], perm[:, None, :]]
     if n <= exact_max_nodes:
-        chunk = max(1, 2_000_000 // (n * n * (1 << (n - 1))))
-        order = np.concatenate([_held_karp(ds[i:i + chunk]) for i in range(0, bsz, chunk)])
+        order = _held_karp(ds)
     else:
         k = min(starts, n)
-        chunk = max(1, 2_000_000 // (n * n * 6 * k))
+        chunk = max(1, 2_000_000 // (n * n * k))  # bounds the repeated matrices: ~16 MB
         order = np.concatenate([_multi_start(ds[i:i + chunk], k) for i in range(0, bsz, chunk)])
     order = np.take_along_axis(perm, order, axis=1)
     return order, tour_length(d, order)
@@ -102,128 +102,24 @@ def _multi_start(d: FloatArray, k: int) -> IntArray:
 
 
 def _held_karp(d: FloatArray) -> IntArray:
-    """Exact shortest tours by dynamic programming over subsets, vectorised over the batch and
-    over each popcount layer of subsets."""
-    bsz, n = d.shape[0], d.shape[1]
-    m = n - 1
-    full = (1 << m) - 1
-    cost = np.full((bsz, 1 << m, m), np.inf)
-    parent = np.zeros((bsz, 1 << m, m), np.int8)
-    bits = 1 << np.arange(m)
-    cost[:, bits, np.arange(m)] = d[:, 0, 1:]
-    masks = np.arange(1 << m)
-    pop = np.array([bin(x).count("1") for x in range(1 << m)])
-    inner_t = d[:, 1:, 1:].transpose(0, 2, 1)  # [b, j, k] = d[k, j]
-    for size in range(2, m + 1):
-        layer = masks[pop == size]
-        prev = layer[:, None] ^ bits[None, :]  # (L, m): subset without j
-        has_j = (layer[:, None] & bits[None, :]) != 0
-        g = cost[:, prev, :] + inner_t[:, None, :, :]  # (B, L, j, k)
-        k_best = np.argmin(g, axis=3)
-        best = np.take_along_axis(g, k_best[..., None], axis=3)[..., 0]
-        best = np.where(has_j[None], best, np.inf)
-        cost[:, layer, :] = best
-        parent[:, layer, :] = k_best
-    total = cost[:, full, :] + d[:, 1:, 0]
-    last = np.argmin(total, axis=1)
-    order = np.zeros((bsz, n), np.int64)
-    mask = np.full(bsz, full)
-    b = np.arange(bsz)
-    for pos in range(m, 0, -1):
-        order[:, pos] = last + 1
-        nxt = parent[b, mask, last].astype(np.int64)
-        mask = mask ^ (1 << last)
-        last = nxt
-    return order
+    """Exact shortest tours by dynamic programming over subsets (:func:`._tour_kernel.held_karp`)."""
+    return held_karp(np.ascontiguousarray(d, dtype=np.float64))
 
 
 def _nearest_neighbour(d: FloatArray, start: IntArray | None = None) -> IntArray:
     """Nearest-neighbour tours from node ``start`` (default 0), rotated to begin at node 0."""
-    bsz, n = d.shape[0], d.shape[1]
-    b = np.arange(bsz)
-    cur = np.zeros(bsz, np.int64) if start is None else np.asarray(start, np.int64)
-    order = np.zeros((bsz, n), np.int64)
-    order[:, 0] = cur
-    visited = np.zeros((bsz, n), bool)
-    visited[b, cur] = True
-    for pos in range(1, n):
-        row = np.where(visited, np.inf, d[b, cur])
-        cur = np.argmin(row, axis=1)
-        order[:, pos] = cur
-        visited[b, cur] = True
-    zero = np.argmax(order == 0, axis=1)
-    return np.take_along_axis(order, (np.arange(n)[None, :] + zero[:, None]) % n, axis=1)
+    d = np.ascontiguousarray(d, dtype=np.float64)
+    first = np.zeros(d.shape[0], np.int64) if start is None else np.ascontiguousarray(start, dtype=np.int64)
+    return nearest_neighbour(d, first)
 
 
 def _local_search(d: FloatArray, order: IntArray, max_rounds: int | None = None) -> IntArray:
-    """Best-improvement 2-opt and or-opt until no move shortens any tour of the batch."""
-    bsz, n = order.shape
-    order = order.copy()
-    pos = np.arange(n)
-    # 2-opt: reverse positions i+1..j (0 <= i, i+2 <= j <= n-1, not the whole tour)
-    ii, jj = np.meshgrid(pos, pos, indexing="ij")
-    two_ok = (jj >= ii + 2) & ~((ii == 0) & (jj == n - 1))
-    # or-opt: move positions s..s+L-1 (s >= 1) between k and k+1, k outside s-1..s+L-1
-    seg_ok = {}
-    for length in (1, 2, 3):
-        s = pos[:, None]
-        k = pos[None, :]
-        seg_ok[length] = (s >= 1) & (s + length - 1 <= n - 1) & ((k < s - 1) | (k > s + length - 1))
-    active = np.arange(bsz)
+    """Best-improvement 2-opt and or-opt until no move shortens any tour of the batch
+    (:func:`._tour_kernel.local_search`; at most ``4 n^2`` moves a tour unless ``max_rounds``)."""
+    n = order.shape[1]
     rounds = max_rounds if max_rounds is not None else 4 * n * n
-    for _ in range(rounds):
-        if len(active) == 0:
-            break
-        o = order[active]
-        da = d[active]
-        b = np.arange(len(active))[:, None, None]
-        p = da[b, o[:, :, None], o[:, None, :]]  # (A, n, n) distances in tour order
-        pn = np.roll(p, -1, axis=2)  # p[a, (c+1) % n]
-        e = np.diagonal(pn, axis1=1, axis2=2)  # edge p -> p+1
-        delta2 = p + np.roll(pn, -1, axis=1) - e[:, :, None] - e[:, None, :]
-        delta2 = np.where(two_ok[None], delta2, np.inf)
-        best = delta2.reshape(len(active), -1).min(axis=1)
-        arg = delta2.reshape(len(active), -1).argmin(axis=1)
-        kind = np.zeros(len(active), np.int64)  # 0: 2-opt, 1..6: or-opt (length, reversed)
-        for length in (1, 2, 3):
-            if length > n - 2:
-                break
-            s_idx = np.arange(1, n - length + 1)
-            tail = s_idx + length - 1
-            after = (s_idx + length) % n
-            gain = e[:, s_idx - 1] + e[:, tail] - p[:, s_idx - 1, after]  # (A, S)
-            e_k = e[:, None, :]
-            fwd = p[:, :, s_idx].transpose(0, 2, 1) + pn[:, tail, :] - e_k - gain[:, :, None]
-            rev = p[:, :, tail].transpose(0, 2, 1) + pn[:, s_idx, :] - e_k - gain[:, :, None]
-            ok = seg_ok[length][s_idx]
-            for r, delta in enumerate((fwd, rev)):
-                delta = np.where(ok[None], delta, np.inf)
-                flat = delta.reshape(len(active), -1)
-                cand = flat.min(axis=1)
-                better = cand < best
-                best = np.where(better, cand, best)
-                arg = np.where(better, flat.argmin(axis=1), arg)
-                kind = np.where(better, 2 * length - 1 + r, kind)
-        tol = 1e-12 * np.maximum(e.sum(axis=1), 1e-9)
-        improve = best < -tol
-        if not improve.any():
-            break
-        rows = np.flatnonzero(improve)
-        kd = kind[rows][:, None]
-        a, c = np.divmod(arg[rows], n)  # 2-opt: (i, j); or-opt: (s - 1, k)
-        a, c = a[:, None], c[:, None]
-        p_ = pos[None, :]
-        rev2 = (p_ >= a + 1) & (p_ <= c)
-        seg_len = (kd + 1) // 2
-        t = p_ - (a + 1)
-        in_seg = (kd > 0) & (t >= 0) & (t < seg_len)
-        frac = np.where(kd % 2 == 1, (t + 1) / (seg_len + 1), (seg_len - t) / (seg_len + 1))
-        keys = np.where((kd == 0) & rev2, 2.0 * (a + 1 + c - p_), 2.0 * p_)
-        keys = np.where(in_seg, 2.0 * c + 1.0 + frac, keys)
-        new = np.take_along_axis(order[active[rows]], np.argsort(keys, axis=1, kind="stable"), axis=1)
-        order[active[rows]] = new
-        active = active[rows]
-    return order
+    return local_search(np.ascontiguousarray(d, dtype=np.float64), np.ascontiguousarray(order, dtype=np.int64),
+                        int(rounds))
 
 
 # ---- hybrid particle swarm (seed 004) --------------------------------------------------------

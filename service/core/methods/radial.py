@@ -99,11 +99,13 @@ def ring_codes(pairs: np.ndarray, angles: np.ndarray, n_stars: int, ring_rad: fl
     keep = h < n_rings
     i = np.concatenate([pairs[keep, 0], pairs[keep, 1]]).astype(np.int64)
     h = np.concatenate([h[keep], h[keep]])
-    flat = np.unique(((h >> 6) * n_stars + i) * 64 + (h & 63))  # one entry per (word, star, bit)
-    word_star, bit = np.divmod(flat, 64)
-    codes = np.zeros(n_words * n_stars, dtype=np.uint64)
-    np.bitwise_or.at(codes, word_star, np.left_shift(np.uint64(1), bit.astype(np.uint64)))
-    return codes.reshape(n_words, n_stars)
+    # one bit a (ring, star), repeats harmless: a boolean map packed 64 rings to a word (bit b of
+    # word w is ring 64 w + b); np.unique of the (word, star, bit) keys took 4.7 s of 7.9 on
+    # seed 002's acceptance database
+    occupied = np.zeros((n_words * 64, n_stars), dtype=bool)
+    occupied[h, i] = True
+    packed = np.packbits(occupied, axis=0, bitorder="little").reshape(n_words, 8, n_stars)
+    return np.ascontiguousarray(packed.transpose(0, 2, 1)).view("<u8")[..., 0].astype(np.uint64)
 
 
 class Radial:

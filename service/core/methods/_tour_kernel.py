@@ -111,7 +111,6 @@ def local_search(d: FloatArray, order: IntArray, rounds: int) -> IntArray:
     out = order.copy()
     p = np.empty((n, n))
     e = np.empty(n)
-    keys = np.empty(n)
     tour = np.empty(n, np.int64)
     for b in range(bsz):
         o = out[b]
@@ -158,18 +157,20 @@ def local_search(d: FloatArray, order: IntArray, rounds: int) -> IntArray:
             if not best < -1e-12 * max(total, 1e-9):
                 break
             a, c = arg // n, arg % n
-            seg_len = (kind + 1) // 2
-            for q in range(n):
-                t = q - (a + 1)
-                if kind > 0 and 0 <= t < seg_len:
-                    frac = (t + 1) / (seg_len + 1) if kind % 2 == 1 else (seg_len - t) / (seg_len + 1)
-                    keys[q] = 2.0 * c + 1.0 + frac
-                elif kind == 0 and a + 1 <= q <= c:
-                    keys[q] = 2.0 * (a + 1 + c - q)
-                else:
-                    keys[q] = 2.0 * q
-            rank = np.argsort(keys, kind="mergesort")
-            for q in range(n):
-                tour[q] = o[rank[q]]
+            if kind == 0:  # 2-opt: positions a+1..c reversed
+                for q in range(n):
+                    tour[q] = o[a + 1 + c - q] if a + 1 <= q <= c else o[q]
+            else:  # or-opt: positions a+1..a+L moved between c and c+1 (c outside them), reversed if kind is even
+                seg_len = (kind + 1) // 2
+                w = 0
+                for q in range(n):
+                    if a + 1 <= q <= a + seg_len:
+                        continue
+                    tour[w] = o[q]
+                    w += 1
+                    if q == c:
+                        for t in range(seg_len):
+                            tour[w] = o[a + 1 + t] if kind % 2 == 1 else o[a + seg_len - t]
+                            w += 1
             o[:] = tour
     return out

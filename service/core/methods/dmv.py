@@ -69,6 +69,7 @@ from ..catalog import StarTable
 from ..geometry import cross
 from ..navdb.reader import NavDatabase
 from ..verify import Verified
+from ._dmv_vote import vote
 from ._pairs import build_pair_table
 from .base import Progress, SolveContext
 
@@ -357,40 +358,17 @@ class DmvMatcher:
                                            catalogue_side=complete)
         if len(cands) == 0:
             return None
-        # all catalogue neighbours of all candidates, flattened (grouped by candidate), with
-        # their cumulative position angles from each candidate's first neighbour
-        lo, hi = self.offsets[cands], self.offsets[cands + 1]
-        cnt = hi - lo
-        flat = np.repeat(lo - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
-        owner = np.repeat(np.arange(len(cands)), cnt)
-        dist = np.asarray(self.dist[flat], np.float64)
-        gaps = np.asarray(self.phi[flat], np.float64)
-        total = np.bincount(owner, gaps, len(cands))
-        pos = np.cumsum(gaps) - gaps - np.repeat(np.cumsum(total) - total, cnt)
-        seen = dist < r_eff + eps
-        flat, owner, dist, pos = flat[seen], owner[seen], dist[seen], pos[seen]
-        g_start = np.searchsorted(owner, np.arange(len(cands)), side="left")
-        g_len = np.searchsorted(owner, np.arange(len(cands)), side="right") - g_start
-        # start alignments: observed neighbour i <-> catalogue neighbour f at the same distance
-        starts = np.argsort(-d_obs, kind="stable")[:START_NEIGHBOURS]  # far ones: sharp angles
-        oi, fj = np.nonzero(np.abs(d_obs[starts, None] - dist[None, :]) <= eps)
+        # every catalogue neighbour of every candidate within reach, each alignment of a start
+        # neighbour with one at the same distance, and each observed neighbour's vote under it
+        # (far start neighbours first: they give sharp angles); one compiled call (_dmv_vote)
+        starts = np.argsort(-d_obs, kind="stable")[:START_NEIGHBOURS]
+        flat, owner, oi, fj, a_ok, k_ok, f_ok, scores = vote(
+            np.ascontiguousarray(d_obs, dtype=np.float64), np.ascontiguousarray(theta, dtype=np.float64),
+            starts.astype(np.int64), self.offsets[cands].astype(np.int64),
+            (self.offsets[cands + 1] - self.offsets[cands]).astype(np.int64), self.dist, self.phi,
+            float(r_eff + eps), float(eps))
         if len(oi) == 0:
             return None
-        oi = starts[oi]
-        rot = theta[oi] - pos[fj]
-        # every (alignment, observed neighbour, catalogue neighbour of that candidate) at once
-        n_f = g_len[owner[fj]]
-        a_rep = np.repeat(np.arange(len(oi)), n_f * m)
-        per = n_f * m
-        within = np.arange(int(per.sum())) - np.repeat(np.cumsum(per) - per, per)
-        k = within // np.repeat(n_f, per)
-        f = g_start[owner[fj]][a_rep] + within % np.repeat(n_f, per)
-        ang = np.abs(np.mod(theta[k] - pos[f] - rot[a_rep] + math.pi, TWO_PI) - math.pi)
-        ok = (np.abs(d_obs[k] - dist[f]) <= eps) & (ang <= eps / d_obs[k] + eps / dist[f])
-        a_ok, k_ok, f_ok = a_rep[ok], k[ok], f[ok]
-        first = np.unique(a_ok * m + k_ok, return_index=True)[1]  # one catalogue match per (a, k)
-        a_ok, k_ok, f_ok = a_ok[first], k_ok[first], f_ok[first]
-        scores = np.bincount(a_ok, minlength=len(oi))
         order = np.argsort(-scores, kind="stable")
         tried = 0
         for a in order:

@@ -23,12 +23,10 @@ SEED000_CAMERA = Camera.from_focal(94.9489, 14.0, 1024, 1024)
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
-    """``-n auto`` (the default, pyproject.toml): one test worker a core and one more, at most 4.
-    A third of the suite's time is spent in tests that wait on servers and CLI runs they start
-    (each importing and warming up), so a spare worker fills those waits; each worker builds the
-    session's databases for itself, so more would cost memory and build time for little gain. A
-    test file runs whole on one worker (``--dist loadfile``)."""
-    return max(1, min(4, usable_cores() + 1))
+    """``-n auto`` (the default, pyproject.toml): one test worker a core, at most 4. Each worker
+    builds the session's databases for itself, so more would cost memory and build time for
+    little gain; a test file runs whole on one worker (``--dist loadfile``)."""
+    return max(1, min(4, usable_cores()))
 
 
 def seed000_config(methods: tuple[str, ...] = ("pyramid", "maxangle")) -> BuildConfig:

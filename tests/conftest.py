@@ -29,6 +29,33 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
     return max(1, min(4, usable_cores()))
 
 
+HEAVY_FIRST = (
+    "tests/cli/test_cli.py", "tests/api/reliability/test_workers.py", "tests/test_docs.py",
+    "tests/client/test_replay_server.py", "tests/api/ui/test_console.py", "tests/core/methods/test_pso.py",
+    "tests/bench/test_bench_smoke.py", "tests/core/test_calibrate.py", "tests/core/methods/test_quad.py",
+    "tests/cluster/test_reprocess.py", "tests/api/reliability/test_limits.py", "tests/api/test_serve.py",
+)
+"""The test files that take longest (``python -m pytest --durations=0``, session 37), collected
+first: a file runs whole on one worker (``--dist loadfile``), and one of them handed out last
+(``test_docs.py`` is collected after ``tests/core``) left the other worker idle for its length."""
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The files of :data:`HEAVY_FIRST` first, in that order; the rest as collected."""
+    rank = {name: i for i, name in enumerate(HEAVY_FIRST)}
+    root = Path(str(config.rootpath))
+
+    def key(pair: tuple[int, pytest.Item]) -> tuple[int, int]:
+        i, item = pair
+        try:
+            rel = Path(str(item.path)).relative_to(root).as_posix()
+        except ValueError:
+            rel = ""
+        return rank.get(rel, len(rank)), i
+
+    items[:] = [item for _, item in sorted(enumerate(items), key=key)]
+
+
 def seed000_config(methods: tuple[str, ...] = ("pyramid", "maxangle")) -> BuildConfig:
     cam = SEED000_CAMERA
     return BuildConfig(fov_max_deg=cam.diagonal_fov_deg + 0.2, fov_min_deg=cam.fov_deg, mag_limit=6.5,

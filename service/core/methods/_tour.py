@@ -4,7 +4,8 @@ the hybrid particle swarm of seed 004.
 A tour starts and ends at node 0 (the centre star) and visits every other node once. Distances
 are angles in radians, given as ``(n, n)`` matrices (or ``(B, n, n)`` batches of equal size).
 
-- :func:`best_tours` is deterministic, vectorised over a batch: Held-Karp dynamic programming
+- :func:`best_tours` is deterministic, over a batch, each tour by a compiled kernel
+  (:mod:`._tour_kernel`): Held-Karp dynamic programming
   (exact) up to ``EXACT_MAX_NODES`` nodes; above that, the shortest of ``START_TOURS``
   nearest-neighbour tours (started from the centre and from the stars nearest it), each
   improved by best-improvement 2-opt and or-opt moves (segments of 1-3 stars, either

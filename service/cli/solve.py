@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import stat
 import sys
 from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from itertools import islice
 from pathlib import Path
 from typing import Annotated, Any
@@ -14,8 +18,6 @@ import typer
 
 from ._progress import err_console, resolve_db
 
-BLOCK = 20_000
-"""Lines of a recording file read, solved and written per block (bounds memory: ~70 MB)."""
 PIPE_BLOCK = 64
 """Lines per block and worker from standard input, so that a live feed's answers come out
 after at most this many frames (one at a time with one worker)."""
@@ -42,7 +44,7 @@ def solve_frames(
 
     if fov_max_error is not None and not fov_max_error > 0:
         raise typer.BadParameter("must be more than 0 deg", param_hint="--fov-max-error")
-    from ..core.batch import FrameError, SolvePool
+    from ..core.batch import SolvePool
     from ..core.navdb import open_database
     from ..core.pipeline import SolveOptions
     from ..core.warmup import warm_up
@@ -50,45 +52,29 @@ def solve_frames(
     database = open_database(resolve_db(db))
     warm_up(database)  # before the clock: frames/s below is of solving, not of starting
     options = SolveOptions(centroid_sigma_px=sigma, fov_max_error_deg=fov_max_error)
-    stream = sys.stdin if str(frames) == "-" else open(frames)
+    # bytes, not text: orjson parses a line's bytes as they are (a str costs it a UTF-8 encoding,
+    # and the pool pickles bytes as one copy) and the answers go out as orjson makes them
+    stream = sys.stdin.buffer if str(frames) == "-" else open(frames, "rb")
+    stdout = sys.stdout.buffer
     pool = SolvePool(database, method=method, options=options, workers=workers, then=_answer, return_errors=True)
     n_workers = pool.workers  # default: the cores this process may use
-    times: list[float] = []
-    n = solved = wrong = checked = 0
-    reasons: Counter[str] = Counter()
-    size = BLOCK if stream is not sys.stdin else (1 if n_workers == 1 else PIPE_BLOCK * n_workers)
     t0 = time.perf_counter()
     with stream, pool:
-        lineno = 0
-        while True:
-            block = list(islice(stream, size))
-            if not block:
-                break
-            numbered = [(lineno + i + 1, line) for i, line in enumerate(block) if line.strip()]
-            lineno += len(block)
-            results = pool.imap([line for _, line in numbered])
-            out: list[str] = []
-            for (num, _), res in zip(numbered, results, strict=True):
-                if isinstance(res, FrameError):
-                    sys.stdout.write("".join(out))
-                    results.close()  # cancels the frames not yet started
-                    err_console.print(f"[red]line {num}:[/red] {res.message}")
+        if stream is sys.stdin.buffer or not stat.S_ISREG(os.fstat(stream.fileno()).st_mode):
+            tally = _solve_stream(stream, pool, stdout, 1 if n_workers == 1 else PIPE_BLOCK * n_workers)
+        else:  # a recording file: the workers read it in byte ranges themselves (SolvePool.map_file)
+            tally = _Tally()
+            for part in pool.map_file(frames, _fold_answers):
+                stdout.write(part.text)
+                tally.add(part)
+                if part.error is not None:
+                    offset, message = part.error
+                    stdout.flush()
+                    err_console.print(f"[red]line {_line_number(frames, offset)}:[/red] {message}")
                     raise typer.Exit(2)
-                text, ok, reason, correct, ms = res
-                out.append(text)
-                n += 1
-                solved += ok
-                times.append(ms)
-                if reason:
-                    reasons[reason] += 1
-                if correct is not None:
-                    checked += 1
-                    wrong += not correct
-                if len(out) >= WRITE_EVERY:  # while the workers go on solving
-                    sys.stdout.write("".join(out))
-                    out.clear()
-            sys.stdout.write("".join(out))
-            sys.stdout.flush()
+            stdout.flush()
+    n, solved, wrong, checked, times, reasons = (tally.n, tally.solved, tally.wrong, tally.checked, tally.times,
+                                                 tally.reasons)
     wall = time.perf_counter() - t0
     t = np.array(times) if times else np.zeros(1)
     why = ", ".join(f"{k} {v}" for k, v in reasons.most_common())
@@ -101,12 +87,101 @@ def solve_frames(
     )
 
 
-def _answer(rec: dict[str, Any], sol: Any) -> tuple[str, bool, str | None, bool | None, float]:
-    """In the worker: the frame's JSON answer, whether it solved, why not, whether it matches
+@dataclass
+class _Tally:
+    """What the summary line counts: answers, identified, wrong and checked against a truth, the
+    solve times (ms) and the no-solutions by reason; ``text`` and ``error`` are a range's own
+    (:func:`_fold_answers`: its answers as JSON Lines, and the byte offset and message of the line
+    it stopped at)."""
+
+    n: int = 0
+    solved: int = 0
+    wrong: int = 0
+    checked: int = 0
+    times: list[float] = field(default_factory=list)
+    reasons: Counter[str] = field(default_factory=Counter)
+    text: bytes = b""
+    error: tuple[int, str] | None = None
+
+    def count(self, answer: tuple[bytes, bool, str | None, bool | None, float]) -> None:
+        """One frame's :func:`_answer`."""
+        _, ok, reason, correct, ms = answer
+        self.n += 1
+        self.solved += ok
+        self.times.append(ms)
+        if reason:
+            self.reasons[reason] += 1
+        if correct is not None:
+            self.checked += 1
+            self.wrong += not correct
+
+    def add(self, other: _Tally) -> None:
+        """Another tally's counts (a range's)."""
+        self.n += other.n
+        self.solved += other.solved
+        self.wrong += other.wrong
+        self.checked += other.checked
+        self.times += other.times
+        self.reasons.update(other.reasons)
+
+
+def _fold_answers(pairs: Iterator[tuple[int, Any]]) -> _Tally:
+    """In the worker: one byte range's answers as one tally, its JSON Lines joined, up to the
+    first line it could not parse or solve (its offset and message kept; the rest not solved)."""
+    from ..core.batch import FrameError
+
+    tally, texts = _Tally(), []
+    for offset, answer in pairs:
+        if isinstance(answer, FrameError):
+            tally.error = (offset, answer.message)
+            break
+        texts.append(answer[0])
+        tally.count(answer)
+    tally.text = b"".join(texts)
+    return tally
+
+
+def _line_number(path: Path, offset: int) -> int:
+    """The line (from 1) of ``path`` that starts at byte ``offset``."""
+    with open(path, "rb") as f:
+        return f.read(offset).count(b"\n") + 1
+
+
+def _solve_stream(stream: Any, pool: Any, stdout: Any, size: int) -> _Tally:
+    """Standard input (or a pipe) block after block of ``size`` lines: a live feed's answers come
+    out as each block is solved."""
+    from ..core.batch import FrameError
+
+    tally, lineno = _Tally(), 0
+    while True:
+        block = list(islice(stream, size))
+        if not block:
+            return tally
+        numbered = [(lineno + i + 1, line) for i, line in enumerate(block) if line.strip()]
+        lineno += len(block)
+        results = pool.imap([line for _, line in numbered])
+        out: list[bytes] = []
+        for (num, _), res in zip(numbered, results, strict=True):
+            if isinstance(res, FrameError):
+                stdout.write(b"".join(out))
+                results.close()  # cancels the frames not yet started
+                err_console.print(f"[red]line {num}:[/red] {res.message}")
+                raise typer.Exit(2)
+            out.append(res[0])
+            tally.count(res)
+            if len(out) >= WRITE_EVERY:  # while the workers go on solving
+                stdout.write(b"".join(out))
+                out.clear()
+        stdout.write(b"".join(out))
+        stdout.flush()
+
+
+def _answer(rec: dict[str, Any], sol: Any) -> tuple[bytes, bool, str | None, bool | None, float]:
+    """In the worker: the frame's JSON answer (UTF-8, one line), whether it solved, why not, whether it matches
     the recording's truth (None without truth) and its solve time, ms."""
     from ..core.evaluate import correct_against_record
 
     correct = correct_against_record(rec, sol)
     reason = None if sol.reason is None else sol.reason.value
-    text = orjson.dumps(sol.to_dict(rec.get("id")), option=orjson.OPT_APPEND_NEWLINE).decode()
+    text = orjson.dumps(sol.to_dict(rec.get("id")), option=orjson.OPT_APPEND_NEWLINE)
     return text, sol.solved, reason, correct, sol.timings_ms.get("total", 0.0)

@@ -118,10 +118,12 @@ def test_bench_batch_smoke(tmp_path: Path, maxangle_db: Path, capsys: pytest.Cap
     from bench import bench_batch
 
     bench_batch.main(["--frames", "12", "--workers", "2", "--fov", "8.58", "--mag-limit", "6.5", "--noise", "0.5",
-                      "--db", str(maxangle_db), "--out", str(tmp_path)])
+                      "--db", str(maxangle_db), "--out", str(tmp_path), "--repeat", "1"])
     out = capsys.readouterr().out
     assert "| 2 |" in out and "identified" in out and "0 wrong" in out
-    (run,) = json.loads((tmp_path / "bench_batch.json").read_text())["results"]
+    saved = json.loads((tmp_path / "bench_batch.json").read_text())
+    (run,) = saved["results"]
+    assert saved["runs"]["2"] == [run]
     assert run["workers"] == 2 and run["frames"] == 12 and run["fps_solving"] > 0
 
 

@@ -82,6 +82,22 @@ def test_solve_rejects_bad_frames_naming_the_line(small_db: Path, tmp_path: Path
     assert proc.returncode != 0
 
 
+def test_solve_stops_at_a_bad_line_after_writing_the_answers_before_it(small_db: Path, tmp_path: Path) -> None:
+    """A file (read by the workers in byte ranges) and standard input (block by block) name the
+    same line and write the same answers before it."""
+    rec = tmp_path / "frames.jsonl"
+    run("sim", "--out", str(rec), "--n", "6", "--noise", "0.5", "--seed", "4")
+    good = rec.read_text().splitlines()
+    mixed = tmp_path / "mixed.jsonl"
+    mixed.write_text("\n".join([*good[:3], "", '{"id": 9, "centroids": [[1, 2]]}', *good[3:]]) + "\n")
+    by_file = run("solve", str(mixed), "--db", str(small_db), "--sigma", "0.5", ok=False)
+    by_stdin = subprocess.run([*SKYFIX, "solve", "-", "--db", str(small_db), "--sigma", "0.5"], input=mixed.read_text(),
+                              capture_output=True, text=True, timeout=300)
+    for proc in (by_file, by_stdin):
+        assert proc.returncode == 2 and "line 5" in proc.stderr and "camera" in proc.stderr, proc.stderr
+        assert [json.loads(line)["id"] for line in proc.stdout.splitlines()] == [0, 1, 2]
+
+
 def test_db_build_refuses_unknown_method(tmp_path: Path) -> None:
     proc = run("db", "build", "--out", str(tmp_path / "x"), "--methods", "nope", ok=False)
     assert proc.returncode == 2 and "--methods" in proc.stderr

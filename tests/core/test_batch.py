@@ -131,3 +131,63 @@ def test_solve_pool_names_a_bad_pool_and_solves_in_process_on_one_worker(seed000
         SolvePool(seed000_db, pool="gpu")
     with SolvePool(seed000_db, workers=1, then=lambda rec, sol: os.getpid()) as sp:
         assert set(sp.imap(_frames(3, 2))) == {os.getpid()}
+
+
+def test_file_ranges_cover_the_file_and_shrink_to_its_end() -> None:
+    from service.core.batch import RANGE_MAX_BYTES, RANGE_MIN_BYTES, file_ranges
+
+    size = 10 * RANGE_MAX_BYTES + 12_345
+    ranges = file_ranges(size, 2)
+    assert ranges[0] == (0, RANGE_MAX_BYTES) and ranges[-1][1] == size
+    assert all(a[1] == b[0] for a, b in zip(ranges, ranges[1:]))  # contiguous, no gap, no overlap
+    steps = [e - s for s, e in ranges]
+    assert steps == sorted(steps, reverse=True) and min(steps[:-1]) == RANGE_MIN_BYTES
+    assert file_ranges(0, 2) == [] and file_ranges(10, 4) == [(0, 10)]
+
+
+def _record_line(rec: dict) -> bytes:  # type: ignore[type-arg]
+    import orjson
+
+    return orjson.dumps(rec) + b"\n"
+
+
+def _ids(pairs):  # type: ignore[no-untyped-def]
+    """A fold for map_file (module level: it is pickled by name): each line's offset and answer."""
+    return [(offset, answer) for offset, answer in pairs]
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_map_file_reads_every_line_once_across_range_bounds(seed000_db: NavDatabase, tmp_path,  # type: ignore[no-untyped-def]
+                                                            monkeypatch: pytest.MonkeyPatch, workers: int) -> None:
+    """Ranges far smaller than a line (forced here) still hand each non-blank line to exactly one
+    worker, in file order, the same answers as one by one; blank lines and a last line without
+    its newline included; a bad line comes back as a FrameError at its own offset."""
+    from service.core import batch
+    from service.core.batch import SolvePool
+
+    monkeypatch.setattr(batch, "RANGE_MIN_BYTES", 97)  # lines are ~600 bytes: most ranges start mid-line
+    monkeypatch.setattr(batch, "RANGE_MAX_BYTES", 1500)
+    sims = simulate_frames(SEED000_CAMERA, 14, SimConfig(centroid_noise_px=0.5, false_stars=1), rng=8)
+    cam = {"width": SEED000_CAMERA.width, "height": SEED000_CAMERA.height, "fov_deg": SEED000_CAMERA.fov_deg}
+    lines = [_record_line({"id": i, "camera": cam, "centroids": np.column_stack(
+        [s.centroids.xy, s.centroids.flux]).round(4).tolist()}) for i, s in enumerate(sims)]
+    lines.insert(5, b"\n")
+    lines.insert(9, b'{"id": "bad", "camera": {"width": 10}}\n')
+    data = b"".join(lines)[:-1]  # the last line without its newline
+    path = tmp_path / "rec.jsonl"
+    path.write_bytes(data)
+    with SolvePool(seed000_db, workers=workers, return_errors=True,
+                   then=lambda rec, sol: (rec["id"], sol.status, [s.hip for s in sol.stars])) as sp:
+        got = [pair for part in sp.map_file(path, _ids) for pair in part]
+    offsets = [off for off, _ in got]
+    starts = [data.index(line.rstrip(b"\n")) for line in lines if line.strip()]
+    assert offsets == starts  # every non-blank line once, in order
+    bad = [answer for _, answer in got if isinstance(answer, FrameError)]
+    assert len(bad) == 1 and "camera" in (bad[0].field or bad[0].message)
+    import orjson
+
+    records = [orjson.loads(line) for line in lines if line.strip() and b'"bad"' not in line]
+    want = [(rec["id"], sol.status, [m.hip for m in sol.stars])
+            for rec, sol in ((rec, solve_frame(frame_from_record(rec), seed000_db)) for rec in records)]
+    assert sum(status == "solved" for _, status, _ in want) >= 10
+    assert [answer for _, answer in got if not isinstance(answer, FrameError)] == want

@@ -143,6 +143,17 @@ for :func:`recheck_pairs` to pair more stars (the near-miss test's widest radius
 for the refit's move)."""
 
 
+DEEPER_REACH = 2.0
+"""Match radii around an unpaired observed star within which a deeper member's star must lie for
+a proven answer to be re-verified there (:func:`recheck_pairs`, from ``first_pass.settle_kernel``
+and ``deeper.refine_deeper``): the recheck pairs at one match radius from the answer's own
+refit, which a proof of four or more pairs moves by a fraction of a radius. With
+:data:`RECHECK_REACH` (7 radii, still what the quad search asks of a closed answer), seeds 000's
+and 001's frames at 2 px with 5 false stars rechecked against ``narrow`` where no star lay
+within one radius (71 and 45 of ~250 proven frames; ~15 us each), and none of those rechecks
+named a star more. The same answers on 9,000 frames of the five cameras (session 38,
+docs/performance.md)."""
+
 _NO_ROW = np.int64(-1)
 """No catalogue row to skip, as an int64 (a literal ``-1`` in a compiled call is typed
 ``Literal[int]``: ``has_star_within`` compiled a second time)."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .answer import recheck
-from .check_kernel import RECHECK_REACH, could_pair_more
+from .check_kernel import DEEPER_REACH, could_pair_more
 from .first_pass import deeper_arrays
 from .navdb.reader import NavDatabase
 from .star_index import field_grid, star_vec64
@@ -50,7 +50,7 @@ def could_pair_more_deeper(obs: Observation, deeper: NavDatabase, found: Verifie
     attitude, so that re-verifying there cannot name more stars (one camera; see
     :func:`~.check_kernel.could_pair_more`)."""
     g = field_grid(deeper, obs.cameras[0].diagonal_fov_deg / 2 + NEAR_MARGIN_DEG)  # the recheck's own grid
-    chord = RECHECK_REACH * radius_px * obs.pixel_scale_rad
+    chord = DEEPER_REACH * radius_px * obs.pixel_scale_rad
     return bool(could_pair_more(obs.vec, found.obs.astype(np.int64), np.array(found.matrix, np.float64), chord,
                                 *g.kernel_args()[:5], star_vec64(deeper), g.columns))
 

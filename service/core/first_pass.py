@@ -42,7 +42,7 @@ from ._entry import EntryCall, plain, sole_entry
 from .answer import FIELD_MARGIN_DEG, answer_kernel, repair_kernel, star_mags
 from .attitude import ARCSEC_PER_RAD, PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
 from .camera import brightest_first
-from .check_kernel import RECHECK_REACH, could_pair_more, recheck_pairs
+from .check_kernel import DEEPER_REACH, could_pair_more, recheck_pairs
 from .hidden import hidden_neighbours
 from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
@@ -409,7 +409,7 @@ def settle_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row
     used_deep = False
     vec, cell, side, keys, starts, stars, columns, mags, hid, hid_lim = star_vec, a_cell, a_side, a_keys, a_starts, \
         a_stars, a_columns, mag, hidden, hidden_lim
-    if has_deep and could_pair_more(obs_vec, m_obs, r, RECHECK_REACH * radius_px * pixel_scale, d_cell, d_side,
+    if has_deep and could_pair_more(obs_vec, m_obs, r, DEEPER_REACH * radius_px * pixel_scale, d_cell, d_side,
                                      d_keys, d_starts, d_stars, d_vec, d_columns):
         # deeper.refine_deeper: the stars the deeper member holds are the hypothesis
         n_known = 0

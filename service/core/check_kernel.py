@@ -185,6 +185,48 @@ def could_pair_more(obs_vec, paired, r, chord, cell, n_side, keys, starts, stars
 
 
 @njit(cache=True, nogil=True)
+def pairable_count(obs_vec, hypothesis, r, chord, cell, n_side, keys, starts, stars, star_vec, columns):
+    """How many observed stars outside ``hypothesis`` (rows) lie within ``chord`` (unit-vector
+    distance) of a star of ``star_vec`` under ``r`` (ICRS -> body): at most that many can be
+    newly paired by a recheck of that hypothesis (:func:`recheck_could_pass`)."""
+    taken = np.zeros(len(obs_vec), np.bool_)
+    for i in hypothesis:
+        taken[i] = True
+    n = 0
+    for m in range(len(obs_vec)):
+        if taken[m]:
+            continue
+        v = obs_vec[m]
+        px = r[0, 0] * v[0] + r[1, 0] * v[1] + r[2, 0] * v[2]
+        py = r[0, 1] * v[0] + r[1, 1] * v[1] + r[2, 1] * v[2]
+        pz = r[0, 2] * v[0] + r[1, 2] * v[1] + r[2, 2] * v[2]
+        if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, _NO_ROW, _NO_ROW,
+                           _NO_ROW):
+            n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def recheck_could_pass(n_obs, n_hypothesis, n_pairable, n_pairs, radius_px, area_px, trials, limit):
+    """False if no :func:`recheck_pairs` of a hypothesis of ``n_hypothesis`` pairs could end with
+    a bound at most ``limit`` and more than ``n_pairs`` pairs, when at most ``n_pairable`` observed
+    stars outside it can be paired (:func:`pairable_count`; ``n_obs`` stars in all).
+
+    :func:`verify_pairs`'s bound is ``trials * P[Binomial(n_obs - n_hypothesis, p) >= n_extra]``
+    with ``n_extra`` the stars paired outside the hypothesis (at most ``n_pairable``) and ``p``
+    the share of the image (``area_px``) within ``radius_px`` of a catalogue star predicted inside
+    it: every paired star is one, and an answer with more pairs has at least ``n_pairs + 1``, so
+    ``p >= (n_pairs + 1) * pi * radius_px**2 / area_px``. The tail falls with ``n_extra`` and
+    rises with ``p``: with both at their bounds it is the least the recheck's bound can be."""
+    if n_pairable < 1:
+        return False
+    p = min((n_pairs + 1) * math.pi * radius_px * radius_px / max(area_px, 1.0), 1.0)
+    n_free = n_obs - n_hypothesis
+    tail = binomial_tail(n_free, n_pairable, p) if n_free >= n_pairable else 1.0
+    return min(1.0, tail * max(trials, 1)) <= limit
+
+
+@njit(cache=True, nogil=True)
 def _field(r, mount, state, chord, g_cell, g_side, g_keys, g_starts, g_stars, star_vec, g_columns, buf):
     """The catalogue rows near the boresight under ``r`` (a view of ``buf``), reusing the last
     gathering while the boresight stays within 0.3 deg of it (the verifier's ``_near`` cache).

@@ -3,7 +3,8 @@
 The general path's counterpart of what :func:`~.first_pass.settle_kernel` does in its compiled
 call: the answer's stars that the deeper member also holds are the hypothesis, the stars newly
 paired there the evidence (:func:`refine_deeper`); skipped when no observed star outside the
-answer lies near a deeper star (:func:`could_pair_more_deeper`).
+answer lies near a deeper star (:func:`could_pair_more_deeper`), or when too few lie near one for
+the evidence to reach the bound it asks (:func:`~.check_kernel.recheck_could_pass`).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .answer import recheck
-from .check_kernel import DEEPER_REACH, could_pair_more
+from .check_kernel import DEEPER_REACH, could_pair_more, pairable_count, recheck_could_pass
 from .first_pass import deeper_arrays
 from .navdb.reader import NavDatabase
 from .star_index import field_grid, star_vec64
@@ -31,6 +32,8 @@ def refine_deeper(obs: Observation, db: NavDatabase, deeper: NavDatabase, found:
     radius = match_radius_px or max(2.5, 3.0 * sigma_px)
     if len(obs.cameras) == 1 and not could_pair_more_deeper(obs, deeper, found, radius):
         return None
+    if len(obs.cameras) == 1 and not _could_pass(obs, deeper, found, found.obs[known], radius, max_false_prob):
+        return None  # no recheck could name more stars with a strong bound (first_pass.settle_kernel's test)
     compiled = recheck(obs, deeper, found.obs[known], rows[known], found.n_trials, radius)  # one camera
     if compiled is None:
         verifier = Verifier(deeper, obs, match_radius_px=radius, max_false_prob=max_false_prob,
@@ -53,6 +56,22 @@ def could_pair_more_deeper(obs: Observation, deeper: NavDatabase, found: Verifie
     chord = DEEPER_REACH * radius_px * obs.pixel_scale_rad
     return bool(could_pair_more(obs.vec, found.obs.astype(np.int64), np.array(found.matrix, np.float64), chord,
                                 *g.kernel_args()[:5], star_vec64(deeper), g.columns))
+
+
+def _could_pass(obs: Observation, deeper: NavDatabase, found: Verified, hypothesis: np.ndarray, radius_px: float,
+                max_false_prob: float) -> bool:
+    """:func:`~.check_kernel.recheck_could_pass` for a recheck of ``hypothesis`` (observed rows)
+    in ``deeper`` (one camera): whether it could end with more pairs than ``found`` and a bound
+    as strong as :func:`refine_deeper` accepts."""
+    g = field_grid(deeper, obs.cameras[0].diagonal_fov_deg / 2 + NEAR_MARGIN_DEG)
+    chord = DEEPER_REACH * radius_px * obs.pixel_scale_rad
+    hyp = np.asarray(hypothesis, dtype=np.int64)
+    n_pairable = pairable_count(obs.vec, hyp, np.array(found.matrix, np.float64), chord, *g.kernel_args()[:5],
+                                star_vec64(deeper), g.columns)
+    cam = obs.cameras[0]
+    return bool(recheck_could_pass(len(obs.vec), len(hyp), n_pairable, len(found.obs), float(radius_px),
+                                   float(cam.width * cam.height), int(found.n_trials),
+                                   min(max_false_prob, Verifier.strong_false_prob)))
 
 
 __all__ = ["could_pair_more_deeper", "refine_deeper"]

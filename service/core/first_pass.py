@@ -42,7 +42,7 @@ from ._entry import EntryCall, plain, sole_entry
 from .answer import FIELD_MARGIN_DEG, answer_kernel, repair_kernel, star_mags
 from .attitude import ARCSEC_PER_RAD, PRIOR_DOF, _fit_stats, pooled_sigma, wahba_kernel
 from .camera import brightest_first
-from .check_kernel import DEEPER_REACH, could_pair_more, recheck_pairs
+from .check_kernel import DEEPER_REACH, could_pair_more, pairable_count, recheck_could_pass, recheck_pairs
 from .hidden import hidden_neighbours
 from .methods import get_matcher
 from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
@@ -425,13 +425,18 @@ def settle_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row
                     k_obs[j] = m_obs[i]
                     k_cat[j] = deep_rows[m_cat[i]]
                     j += 1
-            ok, d_obs, d_cat, d_r, d_prob = recheck_pairs(
-                obs_vec, obs_xy, d_vec, k_obs, k_cat, d_cell, d_side, d_keys, d_starts, d_stars, d_columns,
-                near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale, trials)
-            if ok and d_prob <= strong and len(d_obs) > len(m_obs):
-                m_obs, m_cat, r, prob, used_deep = d_obs, d_cat, d_r, d_prob, True
-                vec, cell, side, keys, starts, stars, columns, mags, hid, hid_lim = d_vec, d_cell, d_side, d_keys, \
-                    d_starts, d_stars, d_columns, d_mag, d_hidden, d_hidden_lim
+            n_pairable = pairable_count(obs_vec, k_obs, r, DEEPER_REACH * radius_px * pixel_scale, d_cell, d_side,
+                                        d_keys, d_starts, d_stars, d_vec, d_columns)
+            # run only where a recheck could name more stars with a strong bound (~15 us each)
+            if recheck_could_pass(len(obs_vec), n_known, n_pairable, len(m_obs), radius_px, cams[0, 3] * cams[0, 4],
+                                  trials, strong):
+                ok, d_obs, d_cat, d_r, d_prob = recheck_pairs(
+                    obs_vec, obs_xy, d_vec, k_obs, k_cat, d_cell, d_side, d_keys, d_starts, d_stars, d_columns,
+                    near_chord, mounts, cams, dist, rows, row_off, radius_px, pixel_scale, trials)
+                if ok and d_prob <= strong and len(d_obs) > len(m_obs):
+                    m_obs, m_cat, r, prob, used_deep = d_obs, d_cat, d_r, d_prob, True
+                    vec, cell, side, keys, starts, stars, columns, mags, hid, hid_lim = d_vec, d_cell, d_side, \
+                        d_keys, d_starts, d_stars, d_columns, d_mag, d_hidden, d_hidden_lim
     if len(m_obs) >= TRIM_MIN_PAIRS and _robust_sigma_px(obs_vec, vec, m_obs, m_cat, r, pixel_scale) > suspect_px:
         return False, False, np.zeros(0, np.int64), np.zeros(0)
     m_obs, m_cat, moved = answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, vec, mags, cell, side, keys, starts,

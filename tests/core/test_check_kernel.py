@@ -9,10 +9,13 @@ import pytest
 
 from service.core.attitude import wahba_kernel
 from service.core.check_kernel import (
+    DEEPER_REACH,
     RECHECK_REACH,
     could_pair_more,
     keep_marginal,
     names_marginal,
+    pairable_count,
+    recheck_could_pass,
     recheck_pairs,
     verify_pairs,
 )
@@ -93,6 +96,45 @@ def test_could_pair_more_only_while_an_unpaired_star_lies_near_a_catalogue_star(
     args = (g.cell, g.n_side, g.keys, g.starts, g.stars, vec, g.columns)
     assert could_pair_more(obs.vec, o_true[:-1].copy(), r, chord, *args)  # the last true star is free
     assert not could_pair_more(obs.vec, np.arange(len(obs), dtype=np.int64), r, chord, *args)  # every star paired
+
+
+def test_recheck_could_pass_never_refuses_a_recheck_that_passes(seed000_db) -> None:
+    """The least bound :func:`recheck_could_pass` gives a recheck is never above the bound it
+    gets: over hypotheses of 3 to all-but-2 true pairs of frames with 0-5 false stars, every
+    recheck that names more stars than the hypothesis' answer at a bound within the limit was
+    allowed; and the test refuses some (a few free stars cannot prove a strong answer)."""
+    vec = star_vec64(seed000_db)
+    near_deg = SEED000_CAMERA.diagonal_fov_deg / 2 + NEAR_MARGIN_DEG
+    g = field_grid(seed000_db, near_deg)
+    grid = sky_grid(seed000_db)
+    row_of = {int(h): i for i, h in enumerate(np.asarray(seed000_db.stars.hip))}
+    passed = refused = 0
+    for false in (0, 2, 5):
+        for f in simulate_frames(SEED000_CAMERA, 25, SimConfig(centroid_noise_px=0.5, false_stars=false), rng=3):
+            obs = _observation([(f.centroids, SEED000_CAMERA, None)], [np.eye(3)])
+            hips = np.asarray(f.hip)[obs.index]
+            true = [(o, row_of[int(h)]) for o, h in enumerate(hips) if h >= 0 and int(h) in row_of]
+            if len(true) < 6:
+                continue
+            k = obs.kernel_arrays
+            for n_hyp in range(3, len(true) - 1):
+                o = np.array([t[0] for t in true[:n_hyp]], np.int64)
+                c = np.array([t[1] for t in true[:n_hyp]], np.int64)
+                for limit, trials in ((1e-12, 1), (1e-5, 50)):
+                    ok, m_obs, _, r, prob = recheck_pairs(
+                        obs.vec, obs.xy, vec, o, c, *g.kernel_args(), 2 * math.sin(math.radians(near_deg) / 2),
+                        k.mounts, k.cams, k.dist, k.rows, k.row_off, RADIUS_PX, obs.pixel_scale_rad, trials)
+                    r0 = wahba_kernel(obs.vec[o], vec[c], np.ones(len(o)))
+                    n_pairable = pairable_count(obs.vec, o, r0, DEEPER_REACH * RADIUS_PX * obs.pixel_scale_rad,
+                                                grid.cell, grid.n_side, grid.keys, grid.starts, grid.stars, vec,
+                                                grid.columns)
+                    allowed = recheck_could_pass(len(obs.vec), n_hyp, n_pairable, n_hyp, RADIUS_PX,
+                                                 float(SEED000_CAMERA.width * SEED000_CAMERA.height), trials, limit)
+                    if ok and prob <= limit and len(m_obs) > n_hyp:
+                        assert allowed, (false, n_hyp, n_pairable, prob)
+                        passed += 1
+                    refused += not allowed
+    assert passed >= 50 and refused >= 10
 
 
 def test_marginal_answers_are_kept_and_named() -> None:

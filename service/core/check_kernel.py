@@ -168,20 +168,7 @@ def could_pair_more(obs_vec, paired, r, chord, cell, n_side, keys, starts, stars
     only through such a star: with ``chord`` at :data:`RECHECK_REACH` match radii, a frame
     whose every unpaired star is farther from that member's stars skips the recheck (~15 us).
     """
-    taken = np.zeros(len(obs_vec), np.bool_)
-    for i in paired:
-        taken[i] = True
-    for m in range(len(obs_vec)):
-        if taken[m]:
-            continue
-        v = obs_vec[m]
-        px = r[0, 0] * v[0] + r[1, 0] * v[1] + r[2, 0] * v[2]
-        py = r[0, 1] * v[0] + r[1, 1] * v[1] + r[2, 1] * v[2]
-        pz = r[0, 2] * v[0] + r[1, 2] * v[1] + r[2, 2] * v[2]
-        if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, _NO_ROW, _NO_ROW,
-                           _NO_ROW):
-            return True
-    return False
+    return _free_near(obs_vec, paired, r, chord, cell, n_side, keys, starts, stars, star_vec, columns, True) > 0
 
 
 @njit(cache=True, nogil=True)
@@ -189,8 +176,15 @@ def pairable_count(obs_vec, hypothesis, r, chord, cell, n_side, keys, starts, st
     """How many observed stars outside ``hypothesis`` (rows) lie within ``chord`` (unit-vector
     distance) of a star of ``star_vec`` under ``r`` (ICRS -> body): at most that many can be
     newly paired by a recheck of that hypothesis (:func:`recheck_could_pass`)."""
+    return _free_near(obs_vec, hypothesis, r, chord, cell, n_side, keys, starts, stars, star_vec, columns, False)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _free_near(obs_vec, paired, r, chord, cell, n_side, keys, starts, stars, star_vec, columns, first_only):
+    """The observed stars outside ``paired`` within ``chord`` of a catalogue star under ``r``
+    (counting stops at the first with ``first_only``)."""
     taken = np.zeros(len(obs_vec), np.bool_)
-    for i in hypothesis:
+    for i in paired:
         taken[i] = True
     n = 0
     for m in range(len(obs_vec)):
@@ -203,6 +197,8 @@ def pairable_count(obs_vec, hypothesis, r, chord, cell, n_side, keys, starts, st
         if has_star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, _NO_ROW, _NO_ROW,
                            _NO_ROW):
             n += 1
+            if first_only:
+                return n
     return n
 
 

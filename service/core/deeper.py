@@ -32,7 +32,8 @@ def refine_deeper(obs: Observation, db: NavDatabase, deeper: NavDatabase, found:
     radius = match_radius_px or max(2.5, 3.0 * sigma_px)
     if len(obs.cameras) == 1 and not could_pair_more_deeper(obs, deeper, found, radius):
         return None
-    if len(obs.cameras) == 1 and not _could_pass(obs, deeper, found, found.obs[known], radius, max_false_prob):
+    if len(obs.cameras) == 1 and not recheck_could_be_strong(obs, deeper, found, found.obs[known], radius,
+                                                             max_false_prob):
         return None  # no recheck could name more stars with a strong bound (first_pass.settle_kernel's test)
     compiled = recheck(obs, deeper, found.obs[known], rows[known], found.n_trials, radius)  # one camera
     if compiled is None:
@@ -58,8 +59,8 @@ def could_pair_more_deeper(obs: Observation, deeper: NavDatabase, found: Verifie
                                 *g.kernel_args()[:5], star_vec64(deeper), g.columns))
 
 
-def _could_pass(obs: Observation, deeper: NavDatabase, found: Verified, hypothesis: np.ndarray, radius_px: float,
-                max_false_prob: float) -> bool:
+def recheck_could_be_strong(obs: Observation, deeper: NavDatabase, found: Verified, hypothesis: np.ndarray,
+                            radius_px: float, max_false_prob: float) -> bool:
     """:func:`~.check_kernel.recheck_could_pass` for a recheck of ``hypothesis`` (observed rows)
     in ``deeper`` (one camera): whether it could end with more pairs than ``found`` and a bound
     as strong as :func:`refine_deeper` accepts."""
@@ -69,9 +70,10 @@ def _could_pass(obs: Observation, deeper: NavDatabase, found: Verified, hypothes
     n_pairable = pairable_count(obs.vec, hyp, np.array(found.matrix, np.float64), chord, *g.kernel_args()[:5],
                                 star_vec64(deeper), g.columns)
     cam = obs.cameras[0]
-    return bool(recheck_could_pass(len(obs.vec), len(hyp), n_pairable, len(found.obs), float(radius_px),
-                                   float(cam.width * cam.height), int(found.n_trials),
+    n = np.int64  # one compiled signature (a literal 0 would be typed apart)
+    return bool(recheck_could_pass(n(len(obs.vec)), n(len(hyp)), n(n_pairable), n(len(found.obs)), float(radius_px),
+                                   float(cam.width * cam.height), n(found.n_trials),
                                    min(max_false_prob, Verifier.strong_false_prob)))
 
 
-__all__ = ["could_pair_more_deeper", "refine_deeper"]
+__all__ = ["could_pair_more_deeper", "recheck_could_be_strong", "refine_deeper"]

@@ -412,7 +412,7 @@ def settle_kernel(obs_vec, obs_xy, flux, has_flux, mounts, cams, dist, rows, row
     if has_deep and could_pair_more(obs_vec, m_obs, r, DEEPER_REACH * radius_px * pixel_scale, d_cell, d_side,
                                      d_keys, d_starts, d_stars, d_vec, d_columns):
         # deeper.refine_deeper: the stars the deeper member holds are the hypothesis
-        n_known = 0
+        n_known = np.int64(0)  # (a literal 0 gave recheck_could_pass a second signature)
         for c in m_cat:
             if deep_rows[c] >= 0:
                 n_known += 1

@@ -13,7 +13,7 @@ import numpy as np
 
 from .attitude import matrix_from_radec_roll
 from .camera import Camera
-from .deeper import could_pair_more_deeper
+from .deeper import could_pair_more_deeper, recheck_could_be_strong
 from .fallback_pass import fallbacks
 from .first_pass import deeper_arrays, settle
 from .geometry import pairwise_angles
@@ -208,8 +208,10 @@ def _screens(members: list[NavDatabase]) -> None:
             table_join(get_matcher(member, "pyramid").table, v, 0.01, 0.01, 0.01, 1e-4)
         # the deeper recheck's screen (could_pair_more_deeper), which only an answer found past the
         # first pass reaches (its first use in a request loaded it from numba's cache)
-        could_pair_more_deeper(_observation([(frame, camera, None)], _ONE_CAMERA), member,
-                               Verified(np.zeros(0, np.int64), np.zeros(0, np.int64), np.eye(3), 1.0, 0), 2.5)
+        nothing = Verified(np.zeros(0, np.int64), np.zeros(0, np.int64), np.eye(3), 1.0, 0)
+        one = _observation([(frame, camera, None)], _ONE_CAMERA)
+        could_pair_more_deeper(one, member, nothing, 2.5)
+        recheck_could_be_strong(one, member, nothing, nothing.obs, 2.5, 1e-3)  # and its bound's test
         # the rows of its stars in each member a plan may refine its answers against (the deeper
         # recheck's map: the deepest fitting member, none shallower) and the stars the others hold
         # that it does not: built on a camera's first frame otherwise (~3 ms, 8-30 ms; the camera

@@ -73,13 +73,13 @@ def solve_frames(
                     err_console.print(f"[red]line {_line_number(frames, offset)}:[/red] {message}")
                     raise typer.Exit(2)
             stdout.flush()
-    n, solved, wrong, checked, times, reasons = (tally.n, tally.solved, tally.wrong, tally.checked, tally.times,
-                                                 tally.reasons)
     wall = time.perf_counter() - t0
-    t = np.array(times) if times else np.zeros(1)
-    why = ", ".join(f"{k} {v}" for k, v in reasons.most_common())
+    n, solved = tally.n, tally.solved
+    t = np.array(tally.times) if tally.times else np.zeros(1)
+    why = ", ".join(f"{k} {v}" for k, v in tally.reasons.most_common())
     err_console.print(
-        f"{solved}/{n} identified ({100 * solved / max(n, 1):.1f}%), {wrong} wrong of {checked} with truth; "
+        f"{solved}/{n} identified ({100 * solved / max(n, 1):.1f}%), "
+        f"{tally.wrong} wrong of {tally.checked} with truth; "
         f"solve ms p50 {np.percentile(t, 50):.2f} p95 {np.percentile(t, 95):.2f} "
         f"p99 {np.percentile(t, 99):.2f}; "
         f"{n / max(wall, 1e-9):.0f} frames/s on {n_workers} worker(s)"
@@ -141,10 +141,18 @@ def _fold_answers(pairs: Iterator[tuple[int, Any]]) -> _Tally:
     return tally
 
 
-def _line_number(path: Path, offset: int) -> int:
-    """The line (from 1) of ``path`` that starts at byte ``offset``."""
+def _line_number(path: Path, offset: int, block: int = 1 << 20) -> int:
+    """The line (from 1) of ``path`` that starts at byte ``offset`` (read ``block`` bytes at a time:
+    a bad line deep in a large recording costs no memory)."""
+    newlines = 0
     with open(path, "rb") as f:
-        return f.read(offset).count(b"\n") + 1
+        while offset > 0:
+            data = f.read(min(block, offset))
+            if not data:
+                break
+            newlines += data.count(b"\n")
+            offset -= len(data)
+    return newlines + 1
 
 
 def _solve_stream(stream: Any, pool: Any, stdout: Any, size: int) -> _Tally:

@@ -222,38 +222,18 @@ class SolvePool:
     def imap(self, frames: Iterable[Item]) -> Iterator[Any]:
         """Solve ``frames``, yielding the answers in order as they are ready. Frames go to the
         workers in chunks, at most :data:`CHUNKS_IN_FLIGHT` per worker at a time, so an
-        iterable is read only as fast as it is solved (an iterable of unknown length in chunks
-        growing from :data:`FIRST_CHUNK`). Closing the generator early cancels
+        iterable is read only as fast as it is solved. Closing the generator early cancels
         the chunks not yet started."""
         if self._procs is None and self._threads is None:
             yield from map(self._task, frames)
             return
-        size, grow = CHUNK, False
+        size = CHUNK
         if isinstance(frames, Sized):  # small chunks for a small block: every worker gets some
             size = max(1, min(CHUNK, -(-len(frames) // (CHUNKS_PER_WORKER * self.workers))))
-        else:  # a stream of unknown length: the first chunks small, so every worker starts at once
-            size, grow = FIRST_CHUNK, True
         items = iter(frames)
-        pending: deque[Future[Any]] = deque()
-        try:
-            while True:
-                while len(pending) < CHUNKS_IN_FLIGHT * self.workers:
-                    chunk = list(islice(items, size))
-                    if not chunk:
-                        break
-                    if grow:
-                        size = min(2 * size, CHUNK)
-                    pending.append(self._procs.submit(_run_chunk, chunk) if self._procs is not None
-                                   else self._threads.submit(_run_local, self._task, chunk))  # type: ignore[union-attr]
-                if not pending:
-                    return
-                answers = pending.popleft().result()
-                if isinstance(answers, _Raised):
-                    raise answers.error
-                yield from answers
-        finally:
-            for f in pending:
-                f.cancel()
+        chunks = iter(lambda: list(islice(items, size)), [])
+        for answers in self._in_order(((_run_local, (chunk,)) for chunk in chunks), CHUNKS_IN_FLIGHT):
+            yield from answers
 
     def map_file(self, path: str | os.PathLike[str], fold: Callable[[Iterator[tuple[int, Any]]], Any]
                  ) -> Iterator[Any]:
@@ -261,7 +241,8 @@ class SolvePool:
         ranges that the workers read themselves: only each range's bounds go to a worker and
         only ``fold``'s value comes back, so the calling process does almost nothing per frame
         (:meth:`imap` pickles every line out and every answer back: ~9 us a frame of this
-        process's core, about a tenth of what each of two workers then has left).
+        process's core; on the 2-core VM of docs/performance.md, session 38, frames/s stayed
+        within the machine's spread).
 
         ``fold(pairs)`` runs in the worker on an iterator of ``(byte offset of the line,
         answer)``, in file order, one range at a time; it may stop early (the range's later
@@ -274,19 +255,27 @@ class SolvePool:
         ranges = file_ranges(os.stat(path).st_size, self.workers)
         if self._procs is None and self._threads is None:
             for start, end in ranges:
-                yield fold(_range_answers(self._task, path, start, end))
+                yield _fold_local(self._task, path, start, end, fold)
             return
-        todo = iter(ranges)
+        yield from self._in_order(((_fold_local, (path, start, end, fold)) for start, end in ranges),
+                                  RANGES_IN_FLIGHT)
+
+    def _in_order(self, jobs: Iterator[tuple[Callable[..., Any], tuple[Any, ...]]], per_worker: int) -> Iterator[Any]:
+        """``fn(task, *args)`` of each job ``(fn, args)``, in the jobs' order, on the workers (a
+        forked worker's task is the one it inherited, :func:`_in_worker`); at most ``per_worker``
+        jobs per worker submitted at a time, and ``jobs`` read only as they are submitted. An
+        exception a forked worker carried back is raised here; closing early cancels the jobs not
+        yet started."""
         pending: deque[Future[Any]] = deque()
         try:
             while True:
-                while len(pending) < RANGES_IN_FLIGHT * self.workers:
-                    bounds = next(todo, None)
-                    if bounds is None:
+                while len(pending) < per_worker * self.workers:
+                    job = next(jobs, None)
+                    if job is None:
                         break
-                    pending.append(self._procs.submit(_run_range, path, *bounds, fold) if self._procs is not None
-                                   else self._threads.submit(  # type: ignore[union-attr]
-                                       lambda b: fold(_range_answers(self._task, path, *b)), bounds))
+                    fn, args = job
+                    pending.append(self._procs.submit(_in_worker, fn, *args) if self._procs is not None
+                                   else self._threads.submit(fn, self._task, *args))  # type: ignore[union-attr]
                 if not pending:
                     return
                 answer = pending.popleft().result()
@@ -314,9 +303,6 @@ class SolvePool:
 CHUNK = 128
 """Frames a worker takes at a time (~15 ms of solving on the 12-deg camera): each chunk costs
 one round trip (~0.1 ms)."""
-FIRST_CHUNK = 8
-"""Frames in the first chunk of a stream of unknown length (``skyfix solve`` reads a recording
-file as it goes); each next chunk twice as many, up to :data:`CHUNK`."""
 CHUNKS_PER_WORKER = 16
 """A block of known length is cut into at least this many chunks per worker, so that both
 workers stay busy to its end."""
@@ -364,22 +350,24 @@ def _range_answers(task: Callable[[Item], Any], path: str, start: int, end: int)
             pos += len(line)
 
 
-def _run_range(path: str, start: int, end: int, fold: Callable[[Iterator[tuple[int, Any]]], Any]) -> Any:
-    """In a forked worker: ``fold`` over the inherited task's answers on a range of ``path``."""
+def _fold_local(task: Callable[[Item], Any], path: str, start: int, end: int,
+                fold: Callable[[Iterator[tuple[int, Any]]], Any]) -> Any:
+    """``fold`` over ``task``'s answers on the lines of ``path`` that start in ``[start, end)``."""
+    return fold(_range_answers(task, path, start, end))
+
+
+def _in_worker(fn: Callable[..., Any], *args: Any) -> Any:
+    """In a forked worker: ``fn(task, *args)`` with the task it inherited; an exception comes back
+    as a :class:`_Raised`, to be raised in the caller."""
     assert _TASK is not None, "a forked worker of a SolvePool"
     try:
-        return fold(_range_answers(_TASK, path, start, end))
+        return fn(_TASK, *args)
     except Exception as exc:  # noqa: BLE001 - re-raised in the caller
-        return _raised(exc)
-
-
-def _raised(exc: BaseException) -> _Raised:
-    """``exc`` as it can cross back from a worker (its text, when it cannot be pickled)."""
-    try:
-        pickle.loads(pickle.dumps(exc))
-    except Exception:  # noqa: BLE001 - an exception that cannot cross processes
-        exc = RuntimeError(f"{type(exc).__name__}: {exc}")
-    return _Raised(exc)
+        try:
+            pickle.loads(pickle.dumps(exc))
+        except Exception:  # noqa: BLE001 - an exception that cannot cross processes
+            exc = RuntimeError(f"{type(exc).__name__}: {exc}")
+        return _Raised(exc)
 
 
 def _make_task(db: NavDatabase | NavDatabaseSet, method: str, options: SolveOptions,
@@ -411,16 +399,9 @@ class _Raised:
 
 
 def _run_local(task: Callable[[Item], Any], chunk: list[Item]) -> list[Any]:
+    """``task`` on each item of ``chunk``."""
     return [task(item) for item in chunk]
 
 
-def _run_chunk(chunk: list[Item]) -> list[Any] | _Raised:
-    """In a forked worker: the inherited task on each item of ``chunk``."""
-    assert _TASK is not None, "a forked worker of a SolvePool"
-    try:
-        return [_TASK(item) for item in chunk]
-    except Exception as exc:  # noqa: BLE001 - re-raised in the caller
-        return _raised(exc)
-
-
-__all__ = ["Frame", "FrameError", "SolvePool", "file_ranges", "frame_from_record", "solve_frame", "solve_iter", "solve_many"]
+__all__ = ["Frame", "FrameError", "SolvePool", "file_ranges", "frame_from_record", "solve_frame", "solve_iter",
+           "solve_many"]

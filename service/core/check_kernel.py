@@ -151,7 +151,7 @@ refit, which a proof of four or more pairs moves by a fraction of a radius. With
 :data:`RECHECK_REACH` (7 radii, still what the quad search asks of a closed answer), seeds 000's
 and 001's frames at 2 px with 5 false stars rechecked against ``narrow`` where no star lay
 within one radius (71 and 45 of ~250 proven frames; ~15 us each), and none of those rechecks
-named a star more. The same answers on 9,000 frames of the five cameras (session 38,
+named a star more. The same answers on 27,000 frames of the five cameras (session 38,
 docs/performance.md)."""
 
 _NO_ROW = np.int64(-1)

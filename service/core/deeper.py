@@ -53,10 +53,7 @@ def could_pair_more_deeper(obs: Observation, deeper: NavDatabase, found: Verifie
     """False if no observed star outside ``found`` lies near a star of ``deeper`` under its
     attitude, so that re-verifying there cannot name more stars (one camera; see
     :func:`~.check_kernel.could_pair_more`)."""
-    g = field_grid(deeper, obs.cameras[0].diagonal_fov_deg / 2 + NEAR_MARGIN_DEG)  # the recheck's own grid
-    chord = DEEPER_REACH * radius_px * obs.pixel_scale_rad
-    return bool(could_pair_more(obs.vec, found.obs.astype(np.int64), np.array(found.matrix, np.float64), chord,
-                                *g.kernel_args()[:5], star_vec64(deeper), g.columns))
+    return bool(could_pair_more(obs.vec, found.obs.astype(np.int64), *_near_args(obs, deeper, found, radius_px)))
 
 
 def recheck_could_be_strong(obs: Observation, deeper: NavDatabase, found: Verified, hypothesis: np.ndarray,
@@ -64,16 +61,21 @@ def recheck_could_be_strong(obs: Observation, deeper: NavDatabase, found: Verifi
     """:func:`~.check_kernel.recheck_could_pass` for a recheck of ``hypothesis`` (observed rows)
     in ``deeper`` (one camera): whether it could end with more pairs than ``found`` and a bound
     as strong as :func:`refine_deeper` accepts."""
-    g = field_grid(deeper, obs.cameras[0].diagonal_fov_deg / 2 + NEAR_MARGIN_DEG)
-    chord = DEEPER_REACH * radius_px * obs.pixel_scale_rad
     hyp = np.asarray(hypothesis, dtype=np.int64)
-    n_pairable = pairable_count(obs.vec, hyp, np.array(found.matrix, np.float64), chord, *g.kernel_args()[:5],
-                                star_vec64(deeper), g.columns)
+    n_pairable = pairable_count(obs.vec, hyp, *_near_args(obs, deeper, found, radius_px))
     cam = obs.cameras[0]
     n = np.int64  # one compiled signature (a literal 0 would be typed apart)
     return bool(recheck_could_pass(n(len(obs.vec)), n(len(hyp)), n(n_pairable), n(len(found.obs)), float(radius_px),
                                    float(cam.width * cam.height), n(found.n_trials),
                                    min(max_false_prob, Verifier.strong_false_prob)))
+
+
+def _near_args(obs: Observation, deeper: NavDatabase, found: Verified, radius_px: float) -> tuple:
+    """The screens' arguments after the observed rows: ``found``'s attitude, the chord of
+    :data:`~.check_kernel.DEEPER_REACH` match radii, and ``deeper``'s grid (the recheck's own)."""
+    g = field_grid(deeper, obs.cameras[0].diagonal_fov_deg / 2 + NEAR_MARGIN_DEG)
+    return (np.array(found.matrix, np.float64), DEEPER_REACH * radius_px * obs.pixel_scale_rad,
+            *g.kernel_args()[:5], star_vec64(deeper), g.columns)
 
 
 __all__ = ["could_pair_more_deeper", "recheck_could_be_strong", "refine_deeper"]

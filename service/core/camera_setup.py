@@ -61,8 +61,13 @@ class CameraSetup:
 def kept_setup(db: NavDatabase | NavDatabaseSet, camera: Camera, method: str, options: Any) -> CameraSetup | None:
     """The setup kept for these very objects, else for equal ones (a camera and options built
     anew for each request of the same camera, as the service and a replay build them), or None."""
-    got = db.__dict__.get("_camera_setups", _NONE).get((id(camera), id(options), method))
+    kept = db.__dict__.get("_camera_setups", _NONE)
+    got = kept.last  # the last one found: a camera's frames in a row need no key built
+    if got is not None and got.camera is camera and got.options is options and got.method == method:
+        return got
+    got = kept.get((id(camera), id(options), method))
     if got is not None and got.camera is camera and got.options is options:
+        kept.last = got
         return got
     try:
         return db.__dict__.get("_camera_setups_by_value", _NONE).get((camera, options, method))
@@ -73,19 +78,30 @@ def kept_setup(db: NavDatabase | NavDatabaseSet, camera: Camera, method: str, op
 def keep_setup(db: NavDatabase | NavDatabaseSet, setup: CameraSetup) -> None:
     """Keep ``setup`` on ``db``, found by the identity of its camera and options (it holds
     them, so their ids stay theirs) and by their values."""
-    kept = db.__dict__.setdefault("_camera_setups", {})
+    kept = db.__dict__.setdefault("_camera_setups", _Setups())
     by_value = db.__dict__.setdefault("_camera_setups_by_value", {})
     if len(kept) >= SETUPS_KEPT:
         kept.clear()
     if len(by_value) >= SETUPS_KEPT:
         by_value.clear()
     kept[(id(setup.camera), id(setup.options), setup.method)] = setup
+    kept.last = setup
     try:
         by_value[(setup.camera, setup.options, setup.method)] = setup
     except TypeError:
         pass
 
 
-_NONE: dict[Any, CameraSetup] = {}
+class _Setups(dict[Any, CameraSetup]):
+    """The set-ups kept by identity, and the last one found (``last``)."""
+
+    __slots__ = ("last",)
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.last: CameraSetup | None = None
+
+
+_NONE = _Setups()
 
 __all__ = ["SETUPS_KEPT", "SETUP_SIZES_KEPT", "CameraSetup", "keep_setup", "kept_setup"]

@@ -49,11 +49,11 @@ from .methods.quad import MAX_CHECKS, MAX_PROBES, QUERY_STARS, QuadMatcher
 from .methods.quad_kernel import STATUS_FOUND, STATUS_MARGINAL, pack_search, quad_search
 from .navdb.reader import NavDatabase
 from .packed import Packed, pack
-from .solution import answer_columns, solution_of, star_hips
+from .solution import answer_columns, star_hips
 from .star_index import field_grid, star_vec64
 from .trimmed import MIN_PAIRS as TRIM_MIN_PAIRS
 from .trimmed import MIN_SIGMA_PX, SUSPECT_SIGMA, _robust_sigma_px
-from .types import Solution
+from .types import MatchedStars, Solution, solved_solution_of
 from .verify import NEAR_MARGIN_DEG, Observation, Verified, Verifier, _image_probes, marginal_choice
 
 
@@ -143,13 +143,18 @@ def unsolved(ints: np.ndarray, floats: np.ndarray, member: NavDatabase) -> First
                      (0.0, 0.0, 0.0), int(ints[1]))
 
 
-def solved_solution(ints: np.ndarray, floats: np.ndarray, method: str = "quad") -> Solution:
+def solved_solution(ints: np.ndarray, floats: np.ndarray, method: str = "quad",
+                    methods_tried: tuple[str, ...] = ("quad",), timings_ms: dict[str, float] | None = None) -> Solution:
     """The :class:`~.types.Solution` of a proven first pass (or of a fallback's answer settled
     in the same call, named ``method``), straight from the arrays :func:`settle_kernel` packs
-    (what ``solution_of(*fp.columns, ...)`` gives, without the :class:`FirstPass` between)."""
+    (what ``solution_of(*fp.columns, ...)`` gives, without the :class:`FirstPass` between, and
+    without slicing the stars' columns: :meth:`~.types.MatchedStars.packed`)."""
     n = int(ints[1])
     prob, rms, sd0, sd1, sd2 = floats[9:14].tolist()
-    return solution_of(ints[2 + 2 * n:], floats[14 + n:], rms, (sd0, sd1, sd2), prob, method)
+    f0 = 14 + n  # the answer's floats: its 7 head numbers, then the stars' columns (solution.answer_columns)
+    q0, q1, q2, q3, ra, dec, roll = floats[f0:f0 + 7].tolist()
+    return solved_solution_of(method, (q0, q1, q2, q3), ra, dec, roll, MatchedStars.packed(ints, floats, 2 + 2 * n, f0),
+                              rms, prob, (sd0, sd1, sd2), methods_tried, timings_ms)
 
 
 @njit(cache=True, nogil=True)

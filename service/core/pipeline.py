@@ -339,7 +339,7 @@ def solve_rig(
                 if cs is not None and stage & 15 == STAGE_SETTLED:  # a fallback's answer, finished in the call
                     used, ran = settled_passes(stage, cs)
                     return _stamped(solved_solution(ints, floats, used), ["quad", *ran], timings, t0, t2)
-                return _stamped(solved_solution(ints, floats), ["quad"], timings, t0, t2)
+                return _timed(solved_solution(ints, floats, timings_ms=timings), timings, t0, t2)
             if cs is not None and stage & 15 == STAGE_REFUSED:  # refused with no observation made
                 refused = refused_chain(stage, ints, cs)
                 timings["vectors"], timings["identify"] = 0.0, (t2 - t0) * 1e3
@@ -450,6 +450,15 @@ def solve_rig(
         if refined is not None:
             db, found = deepest, refined
     return _stamped(solution(obs, db, found, used, sigma * obs.pixel_scale_rad, options), tried, timings, t0, t2)
+
+
+def _timed(sol: Solution, timings: dict[str, float], t0: float, t2: float) -> Solution:
+    """``sol``, made with its ``methods_tried`` and this ``timings`` dict, with the stage times
+    ``_stamped`` adds (ms; building the answer began at ``t2``, the frame at ``t0``)."""
+    now = time.perf_counter()
+    timings["attitude"] = (now - t2) * 1e3
+    timings["total"] = (now - t0) * 1e3
+    return sol
 
 
 def _stamped(sol: Solution, tried: list[str], timings: dict[str, float], t0: float, t2: float) -> Solution:

@@ -80,11 +80,8 @@ def answer(obs: Observation, db: NavDatabase, obs_rows: np.ndarray, cat_rows: np
 def solution_of(ints: np.ndarray, floats: np.ndarray, rms_arcsec: float, sigma_arcsec: tuple[float, float, float],
                 false_prob: float, method: str) -> Solution:
     """The :class:`Solution` of :func:`answer_columns`' arrays and the fit's figures."""
-    n = len(ints) // 3
-    head = floats[:7].tolist()
-    stars = MatchedStars(ints[:n], ints[n:2 * n], floats[7:7 + n], floats[7 + n:7 + 2 * n],
-                         floats[7 + 2 * n:7 + 3 * n], floats[7 + 3 * n:], ints[2 * n:])  # made tuples when read
-    return solved_solution_of(method, (head[0], head[1], head[2], head[3]), head[4], head[5], head[6], stars,
+    q0, q1, q2, q3, ra, dec, roll = floats[:7].tolist()
+    return solved_solution_of(method, (q0, q1, q2, q3), ra, dec, roll, MatchedStars.packed(ints, floats, 0, 0),
                               rms_arcsec, false_prob, sigma_arcsec)
 
 

@@ -133,28 +133,56 @@ class MatchedStars(Sequence[StarMatch]):
         equal length), in :class:`StarMatch`'s field order.
     """
 
-    __slots__ = ("_columns", "_rows")
+    __slots__ = ("_columns", "_rows", "_packed")
 
     def __init__(self, *columns: Any) -> None:
         self._columns = columns
         self._rows: tuple[StarMatch, ...] | None = None
+        self._packed: tuple[np.ndarray, np.ndarray, int, int] | None = None
+
+    @classmethod
+    def packed(cls, ints: np.ndarray, floats: np.ndarray, i0: int, f0: int) -> MatchedStars:
+        """The stars of :func:`~.solution.answer_columns`' arrays held from ``ints[i0:]`` and
+        ``floats[f0 + 7:]`` (after the answer's 7 head numbers), their columns sliced only when
+        read: a proven frame's answer is made without the seven slices (~2 us; an answer whose
+        stars are never read, as in a batch that writes only the attitude, never makes them)."""
+        self = object.__new__(cls)
+        self._columns = ()
+        self._rows = None
+        self._packed = (ints, floats, i0, f0)
+        return self
+
+    def _cols(self) -> tuple[Any, ...]:
+        """The seven columns (unpacked on first use)."""
+        if self._packed is not None:
+            ints, floats, i0, f0 = self._packed
+            n = (len(ints) - i0) // 3
+            f = f0 + 7
+            self._columns = (ints[i0:i0 + n], ints[i0 + n:i0 + 2 * n], floats[f:f + n], floats[f + n:f + 2 * n],
+                             floats[f + 2 * n:f + 3 * n], floats[f + 3 * n:], ints[i0 + 2 * n:])
+            self._packed = None
+        return self._columns
 
     def _tuple(self) -> tuple[StarMatch, ...]:
         if self._rows is None:
-            cols = [c.tolist() if isinstance(c, np.ndarray) else c for c in self._columns]
+            cols = [c.tolist() if isinstance(c, np.ndarray) else c for c in self._cols()]
             self._rows = tuple(map(_star_match, zip(*cols, strict=True)))
             self._columns = ()
         return self._rows
 
     def __len__(self) -> int:
-        return len(self._rows) if self._rows is not None else len(self._columns[0])
+        if self._rows is not None:
+            return len(self._rows)
+        if self._packed is not None:
+            return (len(self._packed[0]) - self._packed[2]) // 3
+        return len(self._columns[0])
 
     def as_dicts(self) -> list[dict[str, Any]]:
         """The stars as the wire format's dicts, straight from the columns when no tuple was
         made yet."""
         if self._rows is not None:
             return [_star_dict(*s) for s in self._rows]
-        cols = [c.tolist() if isinstance(c, np.ndarray) else c for c in self._columns]
+        cols = [c.tolist() if isinstance(c, np.ndarray) else c for c in self._cols()]
         return list(map(_star_dict, *cols))
 
     def column(self, name: str) -> list[Any]:
@@ -162,7 +190,7 @@ class MatchedStars(Sequence[StarMatch]):
         tuple was made yet: scoring reads three fields of every answer)."""
         i = StarMatch._fields.index(name)
         if self._rows is None:
-            col = self._columns[i]
+            col = self._cols()[i]
             return col.tolist() if isinstance(col, np.ndarray) else list(col)
         return [s[i] for s in self._rows]
 
@@ -263,10 +291,14 @@ class Solution:
 
 _SOLUTION_SLOTS = {f.name: Solution.__dict__[f.name].__set__ for f in dataclasses.fields(Solution)}
 """Each :class:`Solution` field's slot setter (:func:`solved_solution_of` writes through them)."""
-_SOLVED_DEFAULTS = tuple((_SOLUTION_SLOTS[f.name], f.default) for f in dataclasses.fields(Solution)
-                         if f.name not in {"status", "method", "quaternion", "ra_deg", "dec_deg", "roll_deg", "stars",
-                                           "rms_arcsec", "false_match_probability", "attitude_sigma_arcsec",
-                                           "timings_ms"})
+_SOLUTION_FIELDS = ("status", "method", "quaternion", "ra_deg", "dec_deg", "roll_deg", "stars", "rms_arcsec",
+                    "false_match_probability", "attitude_sigma_arcsec", "timings_ms", "wcs", "n_detected", "detected",
+                    "reason", "methods_tried", "message", "fov_deg")
+if tuple(f.name for f in dataclasses.fields(Solution)) != _SOLUTION_FIELDS:  # solved_solution_of sets them by name
+    raise AssertionError("Solution's fields changed: update solved_solution_of")
+(_set_status, _set_method, _set_quaternion, _set_ra, _set_dec, _set_roll, _set_stars, _set_rms, _set_prob, _set_sigma,
+ _set_timings, _set_wcs, _set_n_detected, _set_detected, _set_reason, _set_tried, _set_message,
+ _set_fov) = (_SOLUTION_SLOTS[name] for name in _SOLUTION_FIELDS)
 
 
 _REFUSED_FIELDS = ("status", "method", "reason", "methods_tried", "message", "timings_ms")
@@ -293,24 +325,31 @@ def refused_solution_of(method: str, reason: NoSolutionReason, methods_tried: tu
 
 def solved_solution_of(method: str, quaternion: tuple[float, float, float, float], ra_deg: float, dec_deg: float,
                        roll_deg: float, stars: Sequence[StarMatch], rms_arcsec: float, false_match_probability: float,
-                       attitude_sigma_arcsec: tuple[float, float, float]) -> Solution:
+                       attitude_sigma_arcsec: tuple[float, float, float], methods_tried: tuple[str, ...] = (),
+                       timings_ms: dict[str, float] | None = None) -> Solution:
     """``Solution(SolveStatus.SOLVED, method, quaternion=..., ...)``, the other fields at their
     defaults, made through the slots: the frozen dataclass's ``__init__`` sets each of its 18
     fields with ``object.__setattr__``, 3.4 us against 1.5 here (``/work/s30/sol_init.py``), on
-    every solved frame. ``tests/core/test_types.py`` checks it equals the dataclass's own."""
+    every solved frame; each slot's setter bound to a module name, 2.4 us against 3.3 through a
+    dict of them (``/work/s40/soltime.py``, a slower machine). ``tests/core/test_types.py`` checks
+    it equals the dataclass's own."""
     sol = object.__new__(Solution)
-    slot = _SOLUTION_SLOTS
-    slot["status"](sol, SolveStatus.SOLVED)
-    slot["method"](sol, method)
-    slot["quaternion"](sol, quaternion)
-    slot["ra_deg"](sol, ra_deg)
-    slot["dec_deg"](sol, dec_deg)
-    slot["roll_deg"](sol, roll_deg)
-    slot["stars"](sol, stars)
-    slot["rms_arcsec"](sol, rms_arcsec)
-    slot["false_match_probability"](sol, false_match_probability)
-    slot["attitude_sigma_arcsec"](sol, attitude_sigma_arcsec)
-    slot["timings_ms"](sol, {})
-    for setter, default in _SOLVED_DEFAULTS:
-        setter(sol, default)
+    _set_status(sol, SolveStatus.SOLVED)
+    _set_method(sol, method)
+    _set_quaternion(sol, quaternion)
+    _set_ra(sol, ra_deg)
+    _set_dec(sol, dec_deg)
+    _set_roll(sol, roll_deg)
+    _set_stars(sol, stars)
+    _set_rms(sol, rms_arcsec)
+    _set_prob(sol, false_match_probability)
+    _set_sigma(sol, attitude_sigma_arcsec)
+    _set_timings(sol, {} if timings_ms is None else timings_ms)
+    _set_wcs(sol, None)
+    _set_n_detected(sol, None)
+    _set_detected(sol, None)
+    _set_reason(sol, None)
+    _set_tried(sol, methods_tried)
+    _set_message(sol, None)
+    _set_fov(sol, None)
     return sol

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ._entry import EntryCall
 from .attitude import quat_to_matrix
 from .camera import Camera, brightest_first
 from .camera_setup import SETUP_SIZES_KEPT, CameraSetup, keep_setup, kept_setup
@@ -60,7 +61,7 @@ from .refusal import SPARSE_ADVICE_STARS, no_solution, refusal, sparse_advice
 from .solution import solution_of
 from .sparse_screen import HOPELESS, MAX_SCREENED_STARS, SCREENED_METHODS, SEARCH, SPARSE_ONLY, screen
 from .types import Centroids, Solution
-from .verify import Observation, Verified, Verifier, camera_probes
+from .verify import Observation, Verified, Verifier, camera_probes, observation_of
 from .wcs import tan_wcs
 
 Quaternion = Sequence[float]
@@ -473,6 +474,10 @@ def _stamped(sol: Solution, tried: list[str], timings: dict[str, float], t0: flo
 
 _IDENTITY = IDENTITY_MOUNTING  # the one rig_arrays recognises
 
+_BRIGHTEST = EntryCall(brightest_first)
+"""``brightest_first`` past numba's dispatcher (its arguments' usual types: C-contiguous float64
+arrays of 2 and 1 dimensions, three floats)."""
+
 _ONE_CAMERA = [_IDENTITY]
 
 
@@ -565,13 +570,14 @@ def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: 
             xy = np.asarray(cents.xy, dtype=np.float64)[order]
             vec, flux = cam.pixel_to_vector(xy), np.asarray(cents.flux, dtype=np.float64)[order]
         else:
-            order, xy, vec, flux = brightest_first(np.ascontiguousarray(cents.xy, dtype=np.float64),
-                                                   np.ascontiguousarray(cents.flux, dtype=np.float64),
-                                                   float(cam.cx), float(cam.cy), float(cam.f_px))
+            xy = np.ascontiguousarray(cents.xy, dtype=np.float64)
+            flux = np.ascontiguousarray(cents.flux, dtype=np.float64)
+            order, xy, vec, flux = (_BRIGHTEST if xy.ndim == 2 and flux.ndim == 1 else brightest_first)(
+                xy, flux, float(cam.cx), float(cam.cy), float(cam.f_px))
         if mountings[0] is not _IDENTITY and not np.array_equal(mountings[0], _IDENTITY):
             vec = vec @ mountings[0]
         camera, rows, _ = frame_rows(len(order))
-        return Observation(vec, xy, order, camera, (cam,), tuple(mountings), by_camera=(rows,), flux=flux)
+        return observation_of(vec, xy, order, camera, (cam,), tuple(mountings), (rows,), flux)
     vecs, xys, idx, cams, fluxes = [], [], [], [], []
     for c, (cents, cam, _) in enumerate(frames):
         if len(cents) == 0:

@@ -148,7 +148,7 @@ def no_solution(method: str, tried: list[str], trials: int, late: bool, timings:
     ``n_stars`` stars (when nothing else ran, that is the reason: too few stars); ``advice``, what
     might prove it (:func:`sparse_advice`), ends the message."""
     ran = tuple(dict.fromkeys(tried))
-    skipped = ", ".join(m for m in dict.fromkeys(unprovable) if m not in ran)  # on no member
+    skipped = ", ".join(m for m in dict.fromkeys(unprovable) if m not in ran) if unprovable else ""  # on no member
     note = (f"; not run: {skipped} (even with all {n_stars} stars paired, no answer of theirs could pass "
             f"the coincidence bound on this camera)") if skipped else ""
     if late:

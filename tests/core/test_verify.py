@@ -316,3 +316,31 @@ def test_a_pinhole_cameras_probes_are_the_general_paths_bits() -> None:
         assert fast.tobytes() == general.tobytes() == (cam.pixel_to_vector(xy) @ np.eye(3)).tobytes()
         assert fast.shape == (5, 3) and fast.dtype == np.float64
         assert fast.flags.c_contiguous and fast.flags.writeable
+
+
+def test_the_dict_made_observation_is_the_dataclass_s_own() -> None:
+    """``observation_of`` (what the pipeline builds a one-camera frame's stars with) sets every
+    field, equal to the dataclass's ``__init__``, still frozen, its caches working."""
+    import dataclasses
+
+    from service.core.verify import Observation, observation_of
+
+    cam = SEED000_CAMERA
+    rng = np.random.default_rng(3)
+    vec = rng.normal(size=(5, 3))
+    vec /= np.linalg.norm(vec, axis=1)[:, None]
+    args = (vec, rng.uniform(0, 1000, (5, 2)), np.arange(5), np.zeros(5, np.int64), (cam,), (np.eye(3),))
+    rows, flux = np.arange(5), rng.uniform(1, 10, 5)
+    fast = observation_of(*args, (rows,), flux)
+    slow = Observation(*args, by_camera=(rows,), flux=flux)
+    for f in dataclasses.fields(Observation):
+        a, b = getattr(fast, f.name), getattr(slow, f.name)
+        assert (a is b) or (a == b), f.name
+    assert len(fast) == 5 and fast.pixel_scale_rad == slow.pixel_scale_rad
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fast.flux = None  # type: ignore[misc]
+    # the pipeline's observation of a frame, as before
+    frame = simulate_frames(cam, 1, SimConfig(mag_limit=6.5), rng=4)[0].centroids
+    obs = _observation([(frame, cam, None)], [pipeline._IDENTITY])
+    order = np.argsort(-frame.flux, kind="stable")
+    assert np.array_equal(obs.index, order) and np.allclose(obs.vec, cam.pixel_to_vector(frame.xy[order]))

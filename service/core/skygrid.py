@@ -78,7 +78,7 @@ def build_sky_grid(vec: FloatArray, cell_rad: float = DEFAULT_CELL_RAD) -> SkyGr
 _NO_POINTS = np.zeros((0, 3))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def has_star_within(px: float, py: float, pz: float, chord: float, cell: float, n_side: int,
                     keys: np.ndarray, starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
                     columns: np.ndarray, skip0: int, skip1: int, skip2: int) -> bool:
@@ -88,7 +88,7 @@ def has_star_within(px: float, py: float, pz: float, chord: float, cell: float, 
                         _NO_POINTS, 0.0)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def has_star_within_away(px: float, py: float, pz: float, chord: float, cell: float, n_side: int,
                          keys: np.ndarray, starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
                          columns: np.ndarray, skip0: int, skip1: int, skip2: int, away: np.ndarray,
@@ -167,7 +167,7 @@ def _stars_within(pts: np.ndarray, chord: float, cell: float, n_side: int, keys:
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def collect_within(px: float, py: float, pz: float, chord: float, cell: float, n_side: int,
                    keys: np.ndarray, starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
                    columns: np.ndarray, out: np.ndarray) -> int:

@@ -192,7 +192,7 @@ def row_angle(vec: np.ndarray, a: int, b: int) -> float:
     return 2.0 * math.asin(min(math.sqrt(dx * dx + dy * dy + dz * dz) / 2.0, 1.0))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def sorted_edges(vec: np.ndarray, ids: np.ndarray, out: np.ndarray) -> None:
     """The six angles between stars ``vec[ids[0..3]]``, ascending, into ``out`` (6,)."""
     k = 0

@@ -74,7 +74,7 @@ FINGER_MASK = (1 << FINGER_BITS) - 1
 STATUS_NONE, STATUS_FOUND, STATUS_MARGINAL = 0, 1, 2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _label(obs_vec: np.ndarray, o: np.ndarray, star_vec: np.ndarray, c: np.ndarray, tol: float,
            out: np.ndarray) -> bool:
     """The vertex order of catalogue stars ``c`` that best fits observed ``o`` (every angle
@@ -141,7 +141,7 @@ def _first_edge_step(spill, first, end, step):
     return first
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, row):
     """Pattern ``COMBOS[k]``'s sorted edges (radians, from the observed stars' ``angles``), key
     coordinates ``x`` +- ``t`` and bins ``lo..hi``, into ``row`` of ``r_*``; returns the probes

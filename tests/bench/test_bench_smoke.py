@@ -168,3 +168,32 @@ def test_profile_cold_smoke(default_set_db, capsys: pytest.CaptureFixture[str]) 
     for label in ("warm", "in turn", "evicted"):  # the first pass's call is part of the solve
         solve_us, kernel_us = (float(rows[label].split("|")[k].split("/")[0]) for k in (2, 3))
         assert 0 < kernel_us < solve_us
+
+
+def test_profile_kernels_names_the_kernels_that_ran(default_set_db, tmp_path: Path) -> None:
+    """The perf map that bench.profile_kernels writes names the first pass's kernels where they
+    lie in memory (a fresh process: the object code is kept only for kernels loaded after
+    ``install``); perf itself is not needed for this."""
+    import subprocess
+    import sys
+
+    from bench.profile_kernels import short_name
+
+    assert short_name("_ZN7service4core10first_pass17first_pass_kernelB4v1") == "first_pass.first_pass_kernel"
+    assert short_name("NRT_decref") == "NRT_decref"
+    path = tmp_path / "kernels.map"
+    code = ("from bench import profile_kernels as p; p.install()\n"
+            "from service.core.navdb import ensure_default_database, open_database\n"
+            "from service.core.pipeline import solve\n"
+            "frames, cam, opts = p._frames('seed003', 0.5, 0, 0, 1)\n"
+            "db = open_database(ensure_default_database())\n"
+            "print(sum(solve(c, cam, db, options=opts).solved for c in frames[:5]))\n"
+            f"print(p.write_perf_map({str(path)!r}))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[2]).stdout.split()
+    assert int(out[0]) >= 4 and int(out[1]) > 20
+    rows = [line.split(maxsplit=2) for line in path.read_text().splitlines()]
+    names = {short_name(n) for _, _, n in rows}
+    assert {"first_pass.first_pass_kernel", "quad_kernel.quad_search", "NRT_decref"} <= names
+    spans = sorted((int(a, 16), int(s, 16)) for a, s, _ in rows)
+    assert all(s > 0 for _, s in spans)

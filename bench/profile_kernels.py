@@ -220,7 +220,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     rec.wait()
     report = subprocess.run(["perf", "report", "-i", str(out), "--no-children", "--sort", "sym", "--stdio"],
                             capture_output=True, text=True).stdout
-    print(f"\n| share of samples | function |\n|---|---|")
+    print("\n| share of samples | function |\n|---|---|")
     shown = 0
     for line in report.splitlines():
         m = re.match(r"\s+([\d.]+)%\s+\[\.\]\s+(\S+)", line)

@@ -17,7 +17,6 @@ from typing import Any
 
 import numpy as np
 
-from ._entry import EntryCall
 from .attitude import quat_to_matrix
 from .camera import Camera, brightest_first
 from .camera_setup import SETUP_SIZES_KEPT, CameraSetup, keep_setup, kept_setup
@@ -339,7 +338,8 @@ def solve_rig(
                 timings["vectors"], timings["identify"] = 0.0, (t2 - t0) * 1e3
                 if cs is not None and stage & 15 == STAGE_SETTLED:  # a fallback's answer, finished in the call
                     used, ran = settled_passes(stage, cs)
-                    return _stamped(solved_solution(ints, floats, used), ["quad", *ran], timings, t0, t2)
+                    sol = solved_solution(ints, floats, used, tuple(dict.fromkeys(["quad", *ran])), timings)
+                    return _timed(sol, timings, t0, t2)
                 return _timed(solved_solution(ints, floats, timings_ms=timings), timings, t0, t2)
             if cs is not None and stage & 15 == STAGE_REFUSED:  # refused with no observation made
                 refused = refused_chain(stage, ints, cs)
@@ -466,17 +466,11 @@ def _stamped(sol: Solution, tried: list[str], timings: dict[str, float], t0: flo
     """``sol`` with the methods that ran and the stage times (ms; building the answer began
     at ``t2``, the frame at ``t0``)."""
     object.__setattr__(sol, "methods_tried", tuple(dict.fromkeys(tried)))
-    timings["attitude"] = (time.perf_counter() - t2) * 1e3
-    timings["total"] = (time.perf_counter() - t0) * 1e3
     object.__setattr__(sol, "timings_ms", timings)
-    return sol
+    return _timed(sol, timings, t0, t2)
 
 
 _IDENTITY = IDENTITY_MOUNTING  # the one rig_arrays recognises
-
-_BRIGHTEST = EntryCall(brightest_first)
-"""``brightest_first`` past numba's dispatcher (its arguments' usual types: C-contiguous float64
-arrays of 2 and 1 dimensions, three floats)."""
 
 _ONE_CAMERA = [_IDENTITY]
 
@@ -570,10 +564,9 @@ def _observation(frames: Sequence[tuple[Centroids, Camera, object]], mountings: 
             xy = np.asarray(cents.xy, dtype=np.float64)[order]
             vec, flux = cam.pixel_to_vector(xy), np.asarray(cents.flux, dtype=np.float64)[order]
         else:
-            xy = np.ascontiguousarray(cents.xy, dtype=np.float64)
-            flux = np.ascontiguousarray(cents.flux, dtype=np.float64)
-            order, xy, vec, flux = (_BRIGHTEST if xy.ndim == 2 and flux.ndim == 1 else brightest_first)(
-                xy, flux, float(cam.cx), float(cam.cy), float(cam.f_px))
+            order, xy, vec, flux = brightest_first(np.ascontiguousarray(cents.xy, dtype=np.float64),
+                                                   np.ascontiguousarray(cents.flux, dtype=np.float64),
+                                                   float(cam.cx), float(cam.cy), float(cam.f_px))
         if mountings[0] is not _IDENTITY and not np.array_equal(mountings[0], _IDENTITY):
             vec = vec @ mountings[0]
         camera, rows, _ = frame_rows(len(order))

@@ -1,7 +1,7 @@
 """Where the compiled kernels' time goes, function by function: perf samples, named.
 
     python -m bench.profile_kernels [--camera seed001] [--noise 0.5] [--false 0] [--random 0]
-        [--seconds 6] [--top 30] [--callers]
+        [--seconds 6] [--top 30] [--callers] [--refused]
 
 Solves simulated frames of one paper camera with ``auto`` on the default database in a loop
 while ``perf record`` (Debian's linux-perf; software clock, no hardware counters needed)
@@ -15,7 +15,8 @@ the functions' own objects (weak symbols), so each kernel and helper is named wh
 ``NRT_decref``, which take ~15% of a proven frame's first pass), the function that called it
 (the return address on top of the stack that ``perf record --call-graph dwarf`` copies:
 numba's code keeps no frame pointers, so perf's own call graphs stop there).
-``--random N`` solves ``N`` random-point frames instead (the refusal path).
+``--random N`` solves ``N`` random-point frames instead (the refusal path); ``--refused`` keeps
+only the simulated frames that end with no solution (seed 002's sparse frames with false stars).
 """
 
 from __future__ import annotations
@@ -195,6 +196,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--seconds", type=float, default=6.0)
     ap.add_argument("--top", type=int, default=30)
     ap.add_argument("--callers", action="store_true", help="name the callers of the reference counting")
+    ap.add_argument("--refused", action="store_true", help="only the frames that end with no solution")
     args = ap.parse_args(argv)
     if shutil.which("perf") is None:
         raise SystemExit("perf not found (Debian: apt install linux-perf)")
@@ -204,8 +206,12 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     db = open_database(ensure_default_database())
     frames, camera, options = _frames(args.camera, args.noise, args.false, args.random, args.seed)
-    for c in frames:  # every kernel the loop reaches is loaded (and its object code kept)
-        solve(c, camera, db, options=options)
+    ends = [solve(c, camera, db, options=options).solved for c in frames]  # every kernel the loop
+    # reaches is loaded (and its object code kept)
+    if args.refused:
+        frames = [c for c, solved in zip(frames, ends) if not solved]
+        if not frames:
+            raise SystemExit("no frame ends with no solution")
     print(f"{len(frames)} frames; {write_perf_map()} functions named", flush=True)
     out = Path(tempfile.mkdtemp()) / "perf.data"
     graph = ["--call-graph", "dwarf,64"] if args.callers else []

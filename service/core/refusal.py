@@ -148,6 +148,16 @@ def no_solution(method: str, tried: list[str], trials: int, late: bool, timings:
     ``n_stars`` stars (when nothing else ran, that is the reason: too few stars); ``advice``, what
     might prove it (:func:`sparse_advice`), ends the message."""
     ran = tuple(dict.fromkeys(tried))
+    reason, message = _refusal_text(method, ran, tuple(unprovable), trials, late, n_stars, advice)
+    return refused_solution_of(tried[-1] if tried else method, reason, ran, message, timings)
+
+
+@functools.lru_cache(maxsize=1024)
+def _refusal_text(method: str, ran: tuple[str, ...], unprovable: tuple[str, ...], trials: int, late: bool,
+                  n_stars: int | None, advice: str) -> tuple[NoSolutionReason, str]:
+    """:func:`no_solution`'s reason and message, kept per arguments: most refusals of a camera
+    repeat a few (the same methods, no pattern matched), and the message took ~4 of a refusal's
+    ~6 us to format on this VM."""
     skipped = ", ".join(m for m in dict.fromkeys(unprovable) if m not in ran) if unprovable else ""  # on no member
     note = (f"; not run: {skipped} (even with all {n_stars} stars paired, no answer of theirs could pass "
             f"the coincidence bound on this camera)") if skipped else ""
@@ -162,8 +172,7 @@ def no_solution(method: str, tried: list[str], trials: int, late: bool, timings:
                        f"{trials} candidate attitude(s) checked, none proven beyond the coincidence bound")
     hint = f"; {FAILURE_HINTS[method]}" if method in FAILURE_HINTS else ""
     hint += f"; {advice}" if advice else ""
-    return refused_solution_of(tried[-1] if tried else method, reason, ran,
-                               f"{why} (methods tried: {', '.join(ran) or 'none'}){note}{hint}", timings)
+    return reason, f"{why} (methods tried: {', '.join(ran) or 'none'}){note}{hint}"
 
 
 __all__ = ["OUTSIDE_FACTOR", "SPARSE_ADVICE_STARS", "method_refusal", "no_solution", "refusal", "sparse_advice"]

@@ -99,13 +99,14 @@ def screen(obs_vec: np.ndarray, db: NavDatabase, tol: float) -> int:
     if table is None:
         return SEARCH
     counts = triangle_match_counts(*table[:6], np.ascontiguousarray(obs_vec, dtype=np.float64), float(tol),
-                                   *table[6:])
-    if (counts < 0).any():
+                                   *table[6:]).tolist()  # 1 or 4 counts: Python's min and list, not
+    # numpy's reductions (``(counts < 0).any()`` took 4.6 us of a 17-us screen on this VM)
+    if min(counts) < 0:
         return SEARCH
     if n == 3:
         return SEARCH if counts[0] == 1 else HOPELESS
-    fitting = counts[counts > 0]
-    if len(fitting) == 0:
+    fitting = [c for c in counts if c > 0]
+    if not fitting:
         return HOPELESS
     if len(fitting) == 1:
         return SPARSE_ONLY if fitting[0] == 1 else HOPELESS

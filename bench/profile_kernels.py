@@ -186,6 +186,15 @@ def _callers(data: Path, syms: list[tuple[int, int, str]]) -> Counter:
     return found
 
 
+def refused_only(frames: list, solved: list[bool]) -> list:
+    """The frames whose solve ended with no solution (``solved``: each frame's outcome, in order;
+    ``--refused``)."""
+    kept = [c for c, ok in zip(frames, solved, strict=True) if not ok]
+    if not kept:
+        raise SystemExit("no frame ends with no solution")
+    return kept
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--camera", default="seed001")
@@ -209,9 +218,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ends = [solve(c, camera, db, options=options).solved for c in frames]  # every kernel the loop
     # reaches is loaded (and its object code kept)
     if args.refused:
-        frames = [c for c, solved in zip(frames, ends) if not solved]
-        if not frames:
-            raise SystemExit("no frame ends with no solution")
+        frames = refused_only(frames, ends)
     print(f"{len(frames)} frames; {write_perf_map()} functions named", flush=True)
     out = Path(tempfile.mkdtemp()) / "perf.data"
     graph = ["--call-graph", "dwarf,64"] if args.callers else []

@@ -197,3 +197,20 @@ def test_profile_kernels_names_the_kernels_that_ran(default_set_db, tmp_path: Pa
     assert {"first_pass.first_pass_kernel", "quad_kernel.quad_search", "NRT_decref"} <= names
     spans = sorted((int(a, 16), int(s, 16)) for a, s, _ in rows)
     assert all(s > 0 for _, s in spans)
+
+
+def test_profile_kernels_refused_keeps_the_frames_that_end_unsolved(default_set_db) -> None:
+    """``--refused``: of seed 002's frames with 2 false stars (about 40% refused), exactly those
+    whose solve ends with no solution, in order; none at all is an error."""
+    from bench.profile_kernels import _frames, refused_only
+    from service.core.pipeline import solve
+
+    frames, cam, opts = _frames("seed002", 0.5, 2, 0, 3)
+    frames = frames[:40]
+    solved = [solve(c, cam, default_set_db, options=opts).solved for c in frames]
+    kept = refused_only(frames, solved)
+    assert 0 < len(kept) == solved.count(False) < len(frames)
+    assert all(not solve(c, cam, default_set_db, options=opts).solved for c in kept)
+    assert [id(c) for c in kept] == [id(c) for c, ok in zip(frames, solved) if not ok]
+    with pytest.raises(SystemExit):
+        refused_only(frames[:1], [True])

@@ -141,11 +141,11 @@ KNOWN_WRONG = [
     # session 40, `--seed 14`: one more of that kind, in the image's corner: a false star at (20.6,
     # 2.9) px named after HIP 76669 (4.6 Mv), 3.2 px (171") from its prediction.
     ("seed003", 2.0, 5, 0.0, 3038708334197526774, 833, 560),
-    # session 40, `--seed 13`: a close double at the image's edge, with no false star. The blob of
-    # HIP 91926 (epsilon-2 Lyrae) at (413.0, 1021.9) px is named after HIP 91919 (epsilon-1, 4.7 Mv,
-    # 3.5' away: 4 px at 53"/px), predicted 2 px (108") from it at 2 px of noise; epsilon-1's own
-    # blob is not in the frame. The verifier leaves a star unpaired where two catalogue stars fall
-    # within its match radius; here only one did.
+    # session 40, `--seed 13`: a close double at the image's edge, with no false star. The frame holds
+    # one blob for epsilon-1 and epsilon-2 Lyrae (HIP 91919, 91926; 4.7 and 4.6 Mv, 4 px apart at
+    # 53"/px), at (413.0, 1021.9) px between them, labelled with the brighter, epsilon-2. Under the
+    # solved attitude epsilon-2 is predicted at y 1023.75, just outside the 1024-px image, so only
+    # epsilon-1 lay within the match radius inside it: the blob was named after the fainter one.
     ("seed003", 2.0, 0, 0.3, 10920456503512971860, 833, 243),
 ]
 

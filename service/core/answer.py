@@ -26,7 +26,7 @@ from .blends import MIN_DELTA_MAG, dominant_kernel
 from .camera import project_rows
 from .check_kernel import recheck_pairs
 from .hidden import hidden_kernel, hidden_neighbours
-from .match import CROWD, _refine
+from .match import CROWD, EDGE_CROWDS, _refine
 from .medians import median
 from .navdb.reader import NavDatabase
 from .photometry import (
@@ -117,26 +117,42 @@ def recheck(obs, db: NavDatabase, obs_idx: IntArray, cat_idx: IntArray, n_trials
 
 
 @njit(cache=True, nogil=True)
+def field_stars_near(r_cam: np.ndarray, chord: float, cell: float, n_side: int, keys: np.ndarray,
+                     starts: np.ndarray, stars: np.ndarray, columns: np.ndarray, star_vec: np.ndarray,
+                     cam: np.ndarray, dist: np.ndarray, margin_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Catalogue rows predicted inside the image under ``r_cam`` (ICRS -> camera) or outside it
+    within ``margin_px`` of its edge, their pixel positions (pinhole + Brown-Conrady, as
+    :meth:`~service.core.camera.Camera.vector_to_pixel`) and whether each is inside."""
+    buf = np.empty(len(star_vec), np.int64)
+    n = collect_within(r_cam[2, 0], r_cam[2, 1], r_cam[2, 2], chord, cell, n_side, keys, starts, stars, star_vec,
+                       columns, buf)
+    xy = np.full((n, 2), np.nan)  # NaN (behind the camera: not written) is never near
+    inside = project_rows(r_cam, star_vec, buf[:n], cam, dist, xy)
+    x_lo, y_lo = -0.5 - margin_px, -0.5 - margin_px
+    x_hi, y_hi = cam[3] - 0.5 + margin_px, cam[4] - 0.5 + margin_px
+    rows = np.empty(n, np.int64)
+    pxy = np.empty((n, 2))
+    flags = np.empty(n, np.bool_)
+    m = 0
+    for i in range(n):
+        x, y = xy[i, 0], xy[i, 1]
+        if inside[i] or (x >= x_lo and x <= x_hi and y >= y_lo and y <= y_hi):
+            rows[m] = buf[i]
+            pxy[m, 0] = x
+            pxy[m, 1] = y
+            flags[m] = inside[i]
+            m += 1
+    return rows[:m].copy(), pxy[:m].copy(), flags[:m].copy()
+
+
+@njit(cache=True, nogil=True)
 def field_stars(r_cam: np.ndarray, chord: float, cell: float, n_side: int, keys: np.ndarray, starts: np.ndarray,
                 stars: np.ndarray, columns: np.ndarray, star_vec: np.ndarray, cam: np.ndarray,
                 dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Catalogue rows predicted inside the image under ``r_cam`` (ICRS -> camera) and their
-    pixel positions (pinhole + Brown-Conrady, as :meth:`~service.core.camera.Camera.vector_to_pixel`)."""
-    buf = np.empty(len(star_vec), np.int64)
-    n = collect_within(r_cam[2, 0], r_cam[2, 1], r_cam[2, 2], chord, cell, n_side, keys, starts, stars, star_vec,
-                       columns, buf)
-    xy = np.empty((n, 2))
-    inside = project_rows(r_cam, star_vec, buf[:n], cam, dist, xy)
-    rows = np.empty(n, np.int64)
-    pxy = np.empty((n, 2))
-    m = 0
-    for i in range(n):
-        if inside[i]:
-            rows[m] = buf[i]
-            pxy[m, 0] = xy[i, 0]
-            pxy[m, 1] = xy[i, 1]
-            m += 1
-    return rows[:m].copy(), pxy[:m].copy()
+    pixel positions (:func:`field_stars_near` without a margin)."""
+    rows, pxy, _ = field_stars_near(r_cam, chord, cell, n_side, keys, starts, stars, columns, star_vec, cam, dist, 0.0)
+    return rows, pxy
 
 
 @njit(cache=True, nogil=True)
@@ -176,7 +192,11 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
     :func:`service.core.finish.solution` (blends named, implausible pairs dropped; ``cam[0]``
     is the focal length, px, and ``hidden_sep, hidden_limits`` :func:`~service.core.hidden.hidden_neighbours`)."""
     r_cam = mount @ r
-    rows, pxy = field_stars(r_cam, chord, cell, n_side, keys, starts, stars, columns, star_vec, cam, dist)
+    # the field's stars, and those just past the image's edge, which crowd a blob as one inside
+    # would but are never named (match.EDGE_CROWDS)
+    near_rows, near_pxy, near_in = field_stars_near(r_cam, chord, cell, n_side, keys, starts, stars, columns,
+                                                    star_vec, cam, dist, CROWD * radius_px if EDGE_CROWDS else 0.0)
+    rows, pxy = near_rows[near_in], near_pxy[near_in]
     moved = False
     # blends: the free observed stars against the unpaired catalogue stars of the field
     taken = np.zeros(len(obs_xy), np.bool_)
@@ -184,14 +204,14 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
         taken[i] = True
     n_free = len(obs_xy) - np.count_nonzero(taken)
     if n_free > 0:
-        unpaired = ~_member(rows, m_cat)
+        unpaired = ~_member(near_rows, m_cat)
         if unpaired.any():
             mine = np.flatnonzero(~taken)
-            cand = rows[unpaired]
+            cand = near_rows[unpaired]
             mag = star_mag[cand]
             faintest = star_mag[m_cat].max()
-            o, p, n = dominant_kernel(obs_xy, mine, pxy[unpaired], mag, mag <= faintest + 0.5, radius_px, 2.0,
-                                      MIN_DELTA_MAG)
+            o, p, n = dominant_kernel(obs_xy, mine, near_pxy[unpaired], mag,
+                                      (mag <= faintest + 0.5) & near_in[unpaired], radius_px, CROWD, MIN_DELTA_MAG)
             if n > 0:
                 m_obs = np.concatenate((m_obs, o[:n]))
                 m_cat = np.concatenate((m_cat, cand[p[:n]]))

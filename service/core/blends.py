@@ -8,6 +8,8 @@ those pairs to an attitude that is already proven: the blob is named as its brig
 when every other catalogue star within the crowding radius is at least ``MIN_DELTA_MAG``
 fainter and none of them lies farther than ``RESOLVED_PX`` from it (a star the detector would
 have split off: the blob may be that one), and no other observed star competes for it.
+The candidates include the stars predicted just past the image's edge, which crowd a blob but
+are never named (``match.EDGE_CROWDS``).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ from .apparent import aberrate, apparent_directions
 from .attitude import ARCSEC_PER_RAD, estimate
 from .blends import dominant_pairs
 from .hidden import hidden_kernel, hidden_neighbours
-from .match import CROWD
+from .match import CROWD, EDGE_CROWDS
 from .navdb.reader import NavDatabase
 from .photometry import (
     FAINT_GATE_MAG,
@@ -108,8 +108,10 @@ def _blend_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: floa
             continue
         cand, cxy = rows[unpaired], pxy[unpaired]
         mag = np.asarray(db.stars.mag[cand], np.float64)
-        # a blob is as bright as the stars already named, not a faint catalogue star's neighbour
-        o, p = dominant_pairs(obs.xy, mine, cxy, mag, mag <= faintest + 0.5, radius_px)
+        # a blob is as bright as the stars already named, not a faint catalogue star's neighbour;
+        # a star just past the edge crowds it but is never named (match.EDGE_CROWDS)
+        o, p = dominant_pairs(obs.xy, mine, cxy, mag, (mag <= faintest + 0.5) & obs.cameras[c].contains(cxy),
+                              radius_px, CROWD)
         add_o.append(o)
         add_c.append(cand[p])
     if not add_o or sum(len(o) for o in add_o) == 0:
@@ -118,9 +120,9 @@ def _blend_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: floa
                     v.n_trials)
 
 
-def stars_in_field(obs: Observation, db: NavDatabase, r_body: np.ndarray) -> FieldStars:
+def stars_in_field(obs: Observation, db: NavDatabase, r_body: np.ndarray, margin_px: float = 0.0) -> FieldStars:
     """Per camera, the catalogue rows predicted inside its image under the ICRS -> body
-    ``r_body``, with their pixel positions."""
+    ``r_body`` (or outside it within ``margin_px`` of its edge), with their pixel positions."""
     tree = star_tree(db)
     out: FieldStars = []
     for cam, mount in zip(obs.cameras, obs.mountings, strict=True):
@@ -129,6 +131,8 @@ def stars_in_field(obs: Observation, db: NavDatabase, r_body: np.ndarray) -> Fie
         near = np.asarray(tree.query_ball_point(r_cam[2], 2 * math.sin(half / 2)), dtype=np.int64)
         if len(near):
             pxy, inside = cam.vector_to_pixel(np.asarray(db.stars.vec[near]) @ r_cam.T)
+            if margin_px > 0:
+                inside = cam.contains(pxy, -margin_px)  # NaN (behind the camera) compares False
             out.append((near[inside], pxy[inside]))
         else:
             out.append((near, np.zeros((0, 2))))
@@ -143,7 +147,8 @@ def checked_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: flo
     cameras; :func:`service.core.answer.compiled_checks` is the same for one camera, compiled."""
     moved = False
     field = stars_in_field(obs, db, v.matrix)
-    blended = _blend_pairs(obs, db, v, radius_px, field)
+    near = stars_in_field(obs, db, v.matrix, CROWD * radius_px if EDGE_CROWDS else 0.0)
+    blended = _blend_pairs(obs, db, v, radius_px, near)
     if blended is not None:
         v, moved = blended, True
     implausible = _implausible_pairs(obs, db, v, field, radius_px, sigma_px)  # also judges the blends just named

@@ -8,6 +8,7 @@ import pytest
 
 from service.core.answer import compiled_checks, recheck, repaired
 from service.core.finish import checked_pairs
+from service.core.types import Centroids
 from service.core.navdb import NavDatabase
 from service.core.pipeline import _observation
 from service.core.sim import SimConfig, simulate_frames
@@ -105,3 +106,49 @@ def test_repaired_pairs_again_the_stars_a_pulled_fit_left_out(seed000_db: NavDat
         assert all(int(seed000_db.stars.hip[ci]) == int(hip[oi]) for oi, ci in zip(o.tolist(), c.tolist()))
         kept.append(len(o) / len(checked))
     assert len(kept) >= 5 and np.mean(kept) >= 0.9
+
+
+def _triad(a_icrs: np.ndarray, b_icrs: np.ndarray, a_cam: np.ndarray, b_cam: np.ndarray) -> np.ndarray:
+    """The ICRS -> camera matrix taking ``a_icrs`` exactly to ``a_cam`` and ``b_icrs`` as near ``b_cam``
+    as their angle allows (TRIAD)."""
+    def frame(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        t2 = np.cross(u, v)
+        t2 /= np.linalg.norm(t2)
+        return np.column_stack([u, t2, np.cross(u, t2)])
+    return frame(a_cam, b_cam) @ frame(a_icrs, b_icrs).T
+
+
+def test_a_blob_whose_brighter_star_lies_past_the_edge_is_not_named(seed000_db: NavDatabase) -> None:
+    """A close double straddling the image's right edge (HIP 42726, 4.8 Mv, predicted 0.3 px
+    outside; HIP 42715, 5.5 Mv, 2.5 px away inside): their one blob lies inside, within the match
+    radius of both, among stars with 1 px of noise. Neither check names it after the fainter star, the only one inside (the blob
+    is the brighter's as much as the fainter's: ``match.EDGE_CROWDS``); bench_wrong's seed 13 named
+    epsilon-1 Lyrae so."""
+    cam = SEED000_CAMERA
+    stars = seed000_db.stars
+    row_of = {int(h): i for i, h in enumerate(np.asarray(stars.hip))}
+    bright, faint = row_of[42726], row_of[42715]
+    vec, mag = np.asarray(stars.vec, np.float64), np.asarray(stars.mag, np.float64)
+    sep_px = float(np.linalg.norm(vec[bright] - vec[faint])) * cam.f_px
+    edge_x, y = cam.width - 0.5, cam.cy
+    targets = cam.pixel_to_vector(np.array([[edge_x + 0.3, y], [edge_x + 0.3 - sep_px, y]]))
+    r = _triad(vec[bright], vec[faint], targets[0], targets[1])
+    xy, inside = cam.vector_to_pixel(vec @ r.T)
+    assert not inside[bright] and inside[faint] and xy[bright, 0] - edge_x == pytest.approx(0.3, abs=0.01)
+    flux = 10 ** (-0.4 * mag)
+    blob = (flux[bright] * xy[bright] + flux[faint] * xy[faint]) / (flux[bright] + flux[faint])
+    assert cam.contains(blob[None])[0] and max(np.hypot(*(blob - xy[bright])), np.hypot(*(blob - xy[faint]))) < 3.0
+    rows = np.flatnonzero(inside & (np.arange(len(vec)) != faint))
+    assert len(rows) >= 8
+    noisy = xy[rows] + np.random.default_rng(3).normal(0.0, 1.0, (len(rows), 2))  # 1 px, declared
+    cents = Centroids(np.vstack([noisy, blob]), np.append(flux[rows], flux[bright] + flux[faint]))
+    obs = _observation([(cents, cam, None)], [np.eye(3)])  # brightest first
+    blob_row = int(np.flatnonzero(obs.index == len(rows))[0])
+    known = [(i, int(rows[j])) for i, j in enumerate(obs.index.tolist()) if j < len(rows)][:4]
+    v = Verifier(seed000_db, obs, match_radius_px=3.0).check(*map(np.array, zip(*known, strict=True)))
+    assert v is not None and blob_row not in v.obs.tolist()
+    o, c, _ = compiled_checks(obs, seed000_db, v.obs, v.cat, v.matrix, 3.0, 1.0)
+    python, _ = checked_pairs(obs, seed000_db, v, 3.0, 1.0)
+    for obs_rows, cat_rows in ((o, c), (python.obs, python.cat)):
+        assert faint not in cat_rows.tolist() and blob_row not in obs_rows.tolist()
+        assert len(obs_rows) >= 0.9 * len(rows)  # the field's other stars stay named

@@ -116,14 +116,23 @@ LOOK_AHEAD = 2
 alone kept too few misses in flight."""
 
 
+KEY_STRIDES = np.array([N_RATIO_BINS ** 4, N_RATIO_BINS ** 3, N_RATIO_BINS ** 2, N_RATIO_BINS, 1, N_RATIO_BINS ** 5],
+                       dtype=np.int64)
+"""What one step of each bin coordinate adds to :func:`~.quad_build.combine_key`'s key (it is
+linear in the bins): a box's keys are stepped through, not recombined at each probe."""
+
+
 @njit(cache=True, nogil=True, inline="always")
-def _next_bin(cur: np.ndarray, lo: np.ndarray, hi: np.ndarray, row: int) -> None:
-    """Advance the bin combination ``cur`` (6,) over ``lo[row]..hi[row]`` (last coordinate slowest)."""
+def _next_key(cur: np.ndarray, lo: np.ndarray, hi: np.ndarray, row: int, key: np.int64) -> np.int64:
+    """Advance the bin combination ``cur`` (6,) over ``lo[row]..hi[row]`` (first coordinate
+    fastest) and return the key of the new one, from ``key``, the old one's."""
     for i in range(6):
-        cur[i] += 1
-        if cur[i] <= hi[row, i]:
-            break
+        if cur[i] < hi[row, i]:
+            cur[i] += 1
+            return key + KEY_STRIDES[i]
+        key -= (cur[i] - lo[row, i]) * KEY_STRIDES[i]
         cur[i] = lo[row, i]
+    return key
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -182,9 +191,10 @@ def _prefetch_slots(table, mask, r_lo, r_hi, total, row, cur):
     """Request the first table word of each of the ``total`` probes of box ``row``."""
     for i in range(6):
         cur[i] = r_lo[row, i]
+    key = combine_key(cur)
     for _ in range(total):
-        prefetch(table, np.int64(key_hash(combine_key(cur)) & mask))
-        _next_bin(cur, r_lo, r_hi, row)
+        prefetch(table, np.int64(key_hash(key) & mask))
+        key = _next_key(cur, r_lo, r_hi, row, key)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -310,16 +320,16 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
             probes += total
             for i in range(6):
                 e[i], x[i], t[i], lo[i], hi[i] = r_e[row, i], r_x[row, i], r_t[row, i], r_lo[row, i], r_hi[row, i]
-            for i in range(6):
-                cur[i] = lo[i]
             for i in range(6):  # where the query's range lies inside its first and last bin
                 lo_fine[i] = max(int((x[i] - t[i] - lo[i]) * FINE_STEPS), 0)
                 hi_fine[i] = min(int((x[i] + t[i] - hi[i]) * FINE_STEPS), FINE_STEPS - 1)
+            for i in range(6):  # the box's first bin; then its key and fine bounds move with it
+                cur[i] = lo[i]
+                f_lo[i] = lo_fine[i]
+                f_hi[i] = hi_fine[i] if lo[i] == hi[i] else FINE_STEPS - 1
+            key = combine_key(cur)
             for _ in range(total):
-                for i in range(6):
-                    f_lo[i] = lo_fine[i] if cur[i] == lo[i] else 0
-                    f_hi[i] = hi_fine[i] if cur[i] == hi[i] else FINE_STEPS - 1
-                h = key_hash(combine_key(cur))
+                h = key_hash(key)
                 finger = np.int64(h >> np.uint64(64 - FINGER_BITS))
                 sl = h & mask
                 while table[sl] != 0:
@@ -379,7 +389,17 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
                                         s_stars, star_vec, s_columns)
                                 if first_marg < 0:
                                     first_marg = n_pat
-                _next_bin(cur, r_lo, r_hi, row)
+                for i in range(6):  # the next bin (first coordinate fastest), as _next_key
+                    if cur[i] < hi[i]:
+                        cur[i] += 1
+                        key += KEY_STRIDES[i]
+                        f_lo[i] = 0
+                        f_hi[i] = hi_fine[i] if cur[i] == hi[i] else FINE_STEPS - 1
+                        break
+                    key -= (cur[i] - lo[i]) * KEY_STRIDES[i]
+                    cur[i] = lo[i]
+                    f_lo[i] = lo_fine[i]
+                    f_hi[i] = hi_fine[i] if lo[i] == hi[i] else FINE_STEPS - 1
     status = STATUS_MARGINAL if n_marg else STATUS_NONE
     return (status, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, exhausted and n_marg == 0,
             marg_r[:n_marg], marg_prob[:n_marg], marg_off[:n_marg + 1], marg_obs[:marg_off[n_marg]],

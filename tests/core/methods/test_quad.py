@@ -14,13 +14,15 @@ from service.core.methods.quad import QuadMatcher
 from service.core.methods.quad_build import (
     FINE_STEPS,
     FINGER_BITS,
+    N_RATIO_BINS,
     SPILL_COUNT_MASK,
     SPILL_OFFSET_MASK,
     SPILL_OVER,
     build_quad_table,
+    combine_key,
     field_scales,
 )
-from service.core.methods.quad_kernel import STATUS_FOUND
+from service.core.methods.quad_kernel import STATUS_FOUND, _next_key
 from service.core.navdb import BuildConfig, NavDatabase, build_database, open_database
 from service.core.pipeline import SolveOptions, _observation, solve
 from service.core.sim import SimConfig, random_points, simulate_frames
@@ -247,3 +249,25 @@ def test_names_marginal_asks_every_pair_of_the_hypothesis_of_a_counted_answer() 
     assert names_marginal(o, c, off, m_obs, m_cat, 2, first) and not names_marginal(o, c, off, m_obs, m_cat, 2, second)
     assert names_marginal(o, c, off, m_obs, m_cat, 2) and not names_marginal(o, c, off[1:] - 5, m_obs[5:], m_cat[5:], 1)
     assert not names_marginal(np.array([0, 1, 2, 5], np.int64), c, off, m_obs, m_cat, 2)
+
+
+def test_a_boxs_keys_stepped_are_the_keys_of_its_bins() -> None:
+    """The search steps through a box's bins with their keys updated by stride
+    (``quad_kernel._next_key``): each is ``combine_key`` of the bin, every bin once, in the order
+    the search probes them (first coordinate fastest), across the ratio and edge coordinates."""
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        lo = rng.integers(0, N_RATIO_BINS - 3, (1, 6))
+        lo[0, 5] = rng.integers(0, 400)
+        hi = lo + rng.integers(0, 3, (1, 6))
+        cur = lo[0].copy()
+        key = combine_key(cur)
+        seen = []
+        total = int(np.prod(hi - lo + 1))
+        for _ in range(total):
+            assert key == combine_key(cur)
+            seen.append(tuple(cur))
+            key = _next_key(cur, lo, hi, 0, key)
+        assert len(set(seen)) == total
+        assert all(lo[0, i] <= b[i] <= hi[0, i] for b in seen for i in range(6))
+        assert seen[1:2] == [] or seen[1][0] == seen[0][0] + (hi[0, 0] > lo[0, 0])

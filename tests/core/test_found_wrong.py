@@ -155,6 +155,20 @@ KNOWN_WRONG = [
     ("seed003", 2.0, 2, 0.0, 13727609920070369994, 833, 500),
     ("seed003", 2.0, 5, 0.0, 12292781523742250968, 833, 737),
     ("seed003", 2.0, 5, 0.3, 3965202615061329452, 833, 410),
+    # session 41, `--seed 17` to `--seed 20`: five more of that kind, at 2 px with 2-5 false stars: a
+    # false star 2.2-5.5 px from a star 0.03-0.22 mag past the next-faintest pair, at or past the
+    # camera's limit (seed 003: 6.00-6.14 Mv; seed 000: 6.52), the attitude right (a sparse frame of
+    # seed 002 of the same kind: KNOWN_WRONG_SPARSE).
+    ("seed003", 2.0, 5, 0.0, 6775631048045252321, 833, 108),
+    ("seed003", 2.0, 2, 0.0, 7781357002542514233, 833, 660),
+    ("seed003", 2.0, 5, 0.3, 6075573368267747078, 833, 390),
+    ("seed000", 2.0, 5, 0.3, 4292089354677280753, 833, 280),
+    # and two of the edge kind on seed 004's camera (2 px, 5 false stars): the star's own blob pushed
+    # outside the image by the noise, a false star 2.5-3.2 px from its prediction (1021.1 px inside,
+    # 1024.1 px just outside under the final fit) named after it: HIP 33160 (4.0 Mv, observed 1.0 mag
+    # fainter) and HIP 36251 (5.8 Mv, 0.4 mag fainter).
+    ("seed004", 2.0, 5, 0.0, 15885676424625814845, 833, 431),
+    ("seed004", 2.0, 5, 0.0, 7854512143107319413, 833, 355),
 ]
 
 
@@ -163,3 +177,25 @@ KNOWN_WRONG = [
 @pytest.mark.parametrize("case", KNOWN_WRONG, ids=[f"{c[0]}-{c[1]}px-{c[2]}false-{c[6]}" for c in KNOWN_WRONG])
 def test_known_wrong_answers_at_the_limit(case, default_set_db) -> None:
     test_found_wrong_answers_name_no_false_star(case, default_set_db)
+
+
+KNOWN_WRONG_SPARSE = [
+    # session 41, `--seed 20`: seed 002's camera (4 deg, limit 7.0 Mv) at 2 px with 5 false stars, a
+    # 9-centroid frame answered by maxangle with 5 stars, one of them a false star 4.6 px from a
+    # 7.31-Mv star (0.35 mag past the next-faintest pair), the attitude right. Too few stars for the
+    # 8 the test above asks to stay named: here an answer without the false star, or none, passes.
+    ("seed002", 2.0, 5, 0.0, 12399234289052669444, 833, 607),
+]
+
+
+@pytest.mark.xfail(reason="a false star past the camera's limit named in a sparse frame (session 41)")
+@pytest.mark.parametrize("case", KNOWN_WRONG_SPARSE, ids=[f"{c[0]}-{c[1]}px-{c[2]}false-{c[6]}" for c in KNOWN_WRONG_SPARSE])
+def test_known_wrong_answers_of_sparse_frames(case, default_set_db) -> None:
+    camera, noise, false, mag_noise, seed, n, index = case
+    preset = PRESETS[camera]
+    config = SimConfig(mag_limit=preset.mag_limit, centroid_noise_px=noise, false_stars=false, mag_noise=mag_noise)
+    frame = simulate_frames(preset.camera, n, config, rng=seed)[index]
+    sol = solve(frame.centroids, preset.camera, default_set_db, options=SolveOptions(centroid_sigma_px=noise))
+    if sol.solved:
+        s = score(sol, frame.quaternion, frame.hip.tolist(), blends=frame.blends)
+        assert s.correct and s.wrong_stars == 0

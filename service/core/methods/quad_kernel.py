@@ -188,12 +188,17 @@ def _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r
 
 @njit(cache=True, nogil=True, inline="always")
 def _prefetch_slots(table, mask, r_lo, r_hi, total, row, cur):
-    """Request the first table word of each of the ``total`` probes of box ``row``."""
+    """Request the first table words of each of the ``total`` probes of box ``row``: the slot's
+    cache line and the next one (a probe walks its key's cluster until an empty slot, 3-12 words
+    on the default set's tables; with the next line requested too, the quad pass on seed 000's
+    random points took 7-10% less in sequence)."""
     for i in range(6):
         cur[i] = r_lo[row, i]
     key = combine_key(cur)
     for _ in range(total):
-        prefetch(table, np.int64(key_hash(key) & mask))
+        slot = key_hash(key) & mask
+        prefetch(table, np.int64(slot))
+        prefetch(table, np.int64((slot + np.uint64(8)) & mask))  # the next line: a walk crosses into it
         key = _next_key(cur, r_lo, r_hi, row, key)
 
 

@@ -161,35 +161,36 @@ def _first_edge_step(spill, first, end, step):
 def _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, row):
     """Pattern ``COMBOS[k]``'s sorted edges (radians, from the observed stars' ``angles``), key
     coordinates ``x`` +- ``t`` and bins ``lo..hi``, into ``row`` of ``r_*``; returns the probes
-    it needs, or -1 if its size is outside the table's."""
-    e = r_e[row]
+    it needs, or -1 if its size is outside the table's. (Rows indexed, no row view, and one
+    return: where it is inlined, a view or a second exit kept numba's reference counts of its
+    arrays, taken and given back every pattern.)"""
     n = 0
     for i in range(4):
         for j in range(i + 1, 4):
             v = angles[COMBOS[k, i], COMBOS[k, j]]
             m = n
-            while m > 0 and e[m - 1] > v:  # insertion: the six angles ascending, as sorted_edges
-                e[m] = e[m - 1]
+            while m > 0 and r_e[row, m - 1] > v:  # insertion: the six angles ascending, as sorted_edges
+                r_e[row, m] = r_e[row, m - 1]
                 m -= 1
-            e[m] = v
+            r_e[row, m] = v
             n += 1
-    big = e[5]
-    if big > edge_max + tol or big <= 4 * tol:
-        return -1
-    total = 1
-    for i in range(6):
-        if i < 5:
-            x = e[i] / big / ratio_bin
-            t = tol * (1.0 + e[i] / big) / big / ratio_bin
-        else:
-            x = big / edge_bin
-            t = tol / edge_bin
-        r_x[row, i], r_t[row, i] = x, t
-        r_lo[row, i] = max(int(x - t), 0)
-        r_hi[row, i] = int(x + t)
-        if i < 5:
-            r_hi[row, i] = min(r_hi[row, i], N_RATIO_BINS - 1)
-        total *= r_hi[row, i] - r_lo[row, i] + 1
+    big = r_e[row, 5]
+    total = -1
+    if big <= edge_max + tol and big > 4 * tol:
+        total = 1
+        for i in range(6):
+            if i < 5:
+                x = r_e[row, i] / big / ratio_bin
+                t = tol * (1.0 + r_e[row, i] / big) / big / ratio_bin
+            else:
+                x = big / edge_bin
+                t = tol / edge_bin
+            r_x[row, i], r_t[row, i] = x, t
+            r_lo[row, i] = max(int(x - t), 0)
+            r_hi[row, i] = int(x + t)
+            if i < 5:
+                r_hi[row, i] = min(r_hi[row, i], N_RATIO_BINS - 1)
+            total *= r_hi[row, i] - r_lo[row, i] + 1
     return total
 
 
@@ -338,9 +339,14 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
                 o[i] = COMBOS[k, i]
             row = k % (LOOK_AHEAD + 1)
             if phase == 0:
-                if k + LOOK_AHEAD < n_comb:
-                    _look_ahead(angles, k + LOOK_AHEAD, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo,
-                                r_hi, r_total, table, mask, cur)
+                if k + LOOK_AHEAD < n_comb:  # _look_ahead, written out: an inlined call here took and
+                    # gave back a reference count for each of its ten arrays, every pattern
+                    ahead = (k + LOOK_AHEAD) % (LOOK_AHEAD + 1)
+                    n_ahead = _pattern_box(angles, k + LOOK_AHEAD, tol, ratio_bin, edge_bin, edge_max, r_e, r_x,
+                                           r_t, r_lo, r_hi, ahead)
+                    r_total[ahead] = n_ahead
+                    if 0 <= n_ahead <= PATTERN_PROBE_CAP:
+                        _prefetch_slots(table, mask, r_lo, r_hi, n_ahead, ahead, cur)
                 if long_lists and k + 1 < n_comb:  # the next pattern's lists (LONG_LISTS)
                     nxt = (k + 1) % (LOOK_AHEAD + 1)
                     if 0 <= r_total[nxt] <= PATTERN_PROBE_CAP:

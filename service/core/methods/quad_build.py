@@ -194,13 +194,19 @@ def row_angle(vec: np.ndarray, a: int, b: int) -> float:
 
 @njit(cache=True, nogil=True, inline="always")
 def sorted_edges(vec: np.ndarray, ids: np.ndarray, out: np.ndarray) -> None:
-    """The six angles between stars ``vec[ids[0..3]]``, ascending, into ``out`` (6,)."""
-    k = 0
+    """The six angles between stars ``vec[ids[0..3]]``, ascending, into ``out`` (6,). Sorted by
+    insertion as they come: ``out.sort()`` was a call into numba's sort, with a reference count
+    of ``out`` taken and given back, on every candidate of a search."""
+    n = 0
     for i in range(4):
         for j in range(i + 1, 4):
-            out[k] = row_angle(vec, ids[i], ids[j])
-            k += 1
-    out.sort()
+            v = row_angle(vec, ids[i], ids[j])
+            m = n
+            while m > 0 and out[m - 1] > v:
+                out[m] = out[m - 1]
+                m -= 1
+            out[m] = v
+            n += 1
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -170,6 +170,22 @@ def pair_distances(obs_xy: np.ndarray, m_obs: np.ndarray, m_cat: np.ndarray, row
 
 
 @njit(cache=True, nogil=True)
+def pair_offsets(obs_xy: np.ndarray, m_obs: np.ndarray, m_cat: np.ndarray, rows: np.ndarray, pxy: np.ndarray,
+                 inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pair_distances` over ``rows`` predicted inside the image or just past its edge
+    (``inside`` says which), and whether each pair's catalogue star is one past the edge."""
+    d = np.full(len(m_obs), np.nan)
+    outside = np.zeros(len(m_obs), np.bool_)
+    for i in range(len(m_obs)):
+        for j in range(len(rows)):
+            if rows[j] == m_cat[i]:
+                d[i] = math.hypot(obs_xy[m_obs[i], 0] - pxy[j, 0], obs_xy[m_obs[i], 1] - pxy[j, 1])
+                outside[i] = not inside[j]
+                break
+    return d, outside
+
+
+@njit(cache=True, nogil=True)
 def _member(rows: np.ndarray, of: np.ndarray) -> np.ndarray:
     out = np.zeros(len(rows), np.bool_)
     for i in range(len(rows)):
@@ -219,8 +235,9 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
     # plausibility: too bright for its catalogue star, fainter than the frame's completeness, or
     # too far from it for the frame's noise
     pair_mag = star_mag[m_cat]
-    d = pair_distances(obs_xy, m_obs, m_cat, rows, pxy)
-    bad = distant_kernel(d, pair_mag, sigma_px)
+    d_near, outside = pair_offsets(obs_xy, m_obs, m_cat, near_rows, near_pxy, near_in)
+    d = np.where(outside, np.nan, d_near)  # the pairs inside, as the checks below take them
+    bad = distant_kernel(d_near, pair_mag, sigma_px, outside)
     bad |= hidden_kernel(m_cat, d, pair_mag, hidden_sep, hidden_limits, 1.0 / cam[0], CROWD * radius_px)  # left out
     if has_flux:
         bad |= too_bright_kernel(flux[m_obs], pair_mag, THRESHOLD_MAG, _MIN_PAIRS)

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .answer import compiled_checks, pair_distances, repaired
+from .answer import compiled_checks, pair_distances, pair_offsets, repaired
 from .apparent import aberrate, apparent_directions
 from .attitude import ARCSEC_PER_RAD, estimate
 from .blends import dominant_pairs
@@ -56,7 +56,7 @@ FieldStars = list[tuple[np.ndarray, np.ndarray]]
 
 
 def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: FieldStars, radius_px: float,
-                       sigma_px: float = 0.0) -> np.ndarray:
+                       sigma_px: float = 0.0, near: FieldStars | None = None) -> np.ndarray:
     """Pairs whose observed star is far brighter than its catalogue star, whose catalogue star
     is fainter than the frame's completeness or past unseen stars (see
     :mod:`service.core.photometry`), that lie
@@ -68,7 +68,15 @@ def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: Fi
         mine = np.flatnonzero(obs.camera[v.obs] == c)
         if len(mine) and len(rows):
             d[mine] = pair_distances(obs.xy, v.obs[mine], v.cat[mine], rows, pxy)
-    bad = distant_pairs(d, pair_mag, sigma_px)
+    d_near, outside = d, np.zeros(len(v.obs), bool)  # and the pairs whose star is just past the edge
+    if near is not None:
+        d_near = d.copy()
+        for c, (rows, pxy) in enumerate(near):
+            mine = np.flatnonzero((obs.camera[v.obs] == c) & np.isnan(d))
+            if len(mine) and len(rows):
+                d_near[mine], outside[mine] = pair_offsets(obs.xy, v.obs[mine], v.cat[mine], rows, pxy,
+                                                           obs.cameras[c].contains(pxy))
+    bad = distant_pairs(d_near, pair_mag, sigma_px, outside)
     hidden, limits = hidden_neighbours(db)
     for c, cam in enumerate(obs.cameras):
         mine = np.flatnonzero(obs.camera[v.obs] == c)
@@ -151,7 +159,7 @@ def checked_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: flo
     blended = _blend_pairs(obs, db, v, radius_px, near)
     if blended is not None:
         v, moved = blended, True
-    implausible = _implausible_pairs(obs, db, v, field, radius_px, sigma_px)  # also judges the blends just named
+    implausible = _implausible_pairs(obs, db, v, field, radius_px, sigma_px, near)  # also judges the blends just named
     if implausible.any():  # false detections paired with faint catalogue stars by position alone
         v = Verified(v.obs[~implausible], v.cat[~implausible], v.matrix, v.false_prob, v.n_trials)
         moved = True

@@ -16,7 +16,13 @@ own noise is known: ``sigma = max(declared, measured)``, the measured one robust
   a distant position is more likely a coincidence than a real star's error (a uniform landing
   within the radius against a Rayleigh tail: about 5:1 at 2.5 sigma for a 3-sigma radius);
   beyond ``Z_BEYOND`` sigma when it is also fainter than every other pair by ``GAP_MAG`` or
-  more (past the magnitude the rest of the frame reaches: a real star seldom is).
+  more (past the magnitude the rest of the frame reaches: a real star seldom is);
+- beyond ``Z_OUTSIDE`` sigma when its catalogue star is predicted outside the image under the
+  answer's attitude. The pairing pairs only predictions inside (the final fit can move one
+  out), and a real star's blob lies farther inside than its prediction only by its centroid
+  error, while a false detection near the edge lands anywhere: seed 000's camera at 0.5 px
+  named a false star 2.5 px (5 sigma) from a 5.5-Mv star predicted 1.3 px outside the image,
+  whose distance the test did not see (``python -m bench.bench_wrong --frames 100000 --seed 21``).
 
 Refusing a real star costs one identified star; keeping a false one is a wrong answer.
 """
@@ -38,30 +44,36 @@ Z_FAINTEST = 2.5
 Z_BEYOND = 2.0
 """Distance (sigma) beyond which the faintest pair is refused when it is ``GAP_MAG`` fainter
 than every other pair."""
+Z_OUTSIDE = 2.0
+"""Distance (sigma) beyond which a pair whose catalogue star is predicted outside the image is
+refused."""
 GAP_MAG = 0.3
 """Magnitudes by which the faintest pair must pass every other pair for ``Z_BEYOND``."""
 MIN_PAIRS = 6
 """Fewer pairs than this are not tested (too few to know the frame's noise or its faintest star)."""
 
 
-def distant_pairs(d_px: FloatArray, pair_mag: FloatArray, sigma_px: float) -> np.ndarray:
+def distant_pairs(d_px: FloatArray, pair_mag: FloatArray, sigma_px: float,
+                  outside: np.ndarray | None = None) -> np.ndarray:
     """Mask of pairs too far from their catalogue star for the frame's noise.
 
     ``d_px`` are the distances (px) of the observed stars from their catalogue stars projected
     under the answer's attitude (NaN: unknown, never refused), ``pair_mag`` the catalogue
-    magnitudes, ``sigma_px`` the declared centroid error per axis (px). Compiled:
+    magnitudes, ``sigma_px`` the declared centroid error per axis (px), ``outside`` which
+    catalogue stars are predicted outside the image (default: none). Compiled:
     :func:`distant_kernel`.
     """
-    return distant_kernel(np.ascontiguousarray(d_px, dtype=np.float64),
-                          np.ascontiguousarray(pair_mag, dtype=np.float64), float(sigma_px))
+    d = np.ascontiguousarray(d_px, dtype=np.float64)
+    out = np.zeros(len(d), np.bool_) if outside is None else np.ascontiguousarray(outside, dtype=np.bool_)
+    return distant_kernel(d, np.ascontiguousarray(pair_mag, dtype=np.float64), float(sigma_px), out)
 
 
 @njit(cache=True, nogil=True)
-def distant_kernel(d_px: np.ndarray, pair_mag: np.ndarray, sigma_px: float) -> np.ndarray:
-    """Compiled body of :func:`distant_pairs`."""
+def distant_kernel(d_px: np.ndarray, pair_mag: np.ndarray, sigma_px: float, outside: np.ndarray) -> np.ndarray:
+    """Compiled body of :func:`distant_pairs` (the frame's noise measured on the pairs inside)."""
     n = len(d_px)
     out = np.zeros(n, np.bool_)
-    known = d_px[np.isfinite(d_px)]
+    known = d_px[np.isfinite(d_px) & ~outside]
     if len(known) < MIN_PAIRS:
         return out
     measured = math.sqrt(median(known * known) / math.log(4.0))
@@ -81,9 +93,11 @@ def distant_kernel(d_px: np.ndarray, pair_mag: np.ndarray, sigma_px: float) -> n
             limit = Z_BEYOND if faintest - second >= GAP_MAG else Z_FAINTEST
         else:
             limit = Z_ANY
+        if outside[i]:
+            limit = min(limit, Z_OUTSIDE)
         if z > limit:
             out[i] = True
     return out
 
 
-__all__ = ["GAP_MAG", "MIN_PAIRS", "Z_ANY", "Z_BEYOND", "Z_FAINTEST", "distant_kernel", "distant_pairs"]
+__all__ = ["GAP_MAG", "MIN_PAIRS", "Z_ANY", "Z_BEYOND", "Z_FAINTEST", "Z_OUTSIDE", "distant_kernel", "distant_pairs"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.core.residuals import GAP_MAG, Z_ANY, Z_BEYOND, Z_FAINTEST, distant_pairs
+from service.core.residuals import GAP_MAG, Z_ANY, Z_BEYOND, Z_FAINTEST, Z_OUTSIDE, distant_pairs
 
 
 def _frame(n: int, sigma: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -59,3 +59,19 @@ def test_real_stars_are_seldom_refused() -> None:
         total += len(d)
     # the faintest of 20 beyond 2.5 sigma: exp(-3.125) / 20 ~ 0.2 % of the pairs
     assert refused / total < 0.005
+
+
+def test_a_pair_predicted_outside_the_image_is_held_to_z_outside() -> None:
+    """A pair whose catalogue star is predicted outside the image is refused beyond Z_OUTSIDE
+    sigma, where one inside is kept to Z_ANY; its distance does not enter the frame's noise."""
+    d, mag = _frame(12, 0.5, np.random.default_rng(3))
+    d = np.minimum(d, 2.0 * 0.5)
+    d[4] = (Z_OUTSIDE + 1.0) * 0.5  # between Z_OUTSIDE and Z_ANY sigma; not the faintest pair
+    assert Z_OUTSIDE + 1.0 < Z_ANY and not distant_pairs(d, mag, 0.5)[4]  # inside: kept
+    outside = np.zeros(12, bool)
+    outside[4] = True
+    assert np.flatnonzero(distant_pairs(d, mag, 0.5, outside)).tolist() == [4]
+    d[4] = 0.6  # within Z_OUTSIDE of its prediction: a real star's blob just inside the edge
+    assert not distant_pairs(d, mag, 0.5, outside).any()
+    d[4] = 50.0  # far, and outside: it does not raise the measured noise that judges the others
+    assert np.flatnonzero(distant_pairs(d, mag, 0.0, outside)).tolist() == [4]

@@ -105,7 +105,7 @@ FOUND = [
     # false star 2.5 px (5 sigma) from HIP 110986 (5.5 Mv), which the final fit predicted 1.3 px
     # outside the image, was kept: the distance test saw only the pairs predicted inside.
     ("seed000", 0.5, 2, 0.3, 2277085313737080371, 833, 732),
-    # and a known wrong answer of sessions 10-30 (`--seed 4` to `--seed 9`), of the same kind: a false star 4.9
+    # and a known wrong answer of session 30 (`--seed 8`), of the same kind: a false star 4.9
     # px (2.45 sigma at 2 px) from a star predicted 0.4 px outside the image.
     ("seed004", 2.0, 5, 0.0, 14512514463542990805, 833, 478),
 ]

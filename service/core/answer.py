@@ -156,24 +156,12 @@ def field_stars(r_cam: np.ndarray, chord: float, cell: float, n_side: int, keys:
 
 
 @njit(cache=True, nogil=True)
-def pair_distances(obs_xy: np.ndarray, m_obs: np.ndarray, m_cat: np.ndarray, rows: np.ndarray,
-                   pxy: np.ndarray) -> np.ndarray:
-    """Distance (px) of each pair's observed star from its catalogue star's predicted position
-    (``rows`` and their pixels ``pxy``); NaN for a catalogue star not among ``rows``."""
-    d = np.full(len(m_obs), np.nan)
-    for i in range(len(m_obs)):
-        for j in range(len(rows)):
-            if rows[j] == m_cat[i]:
-                d[i] = math.hypot(obs_xy[m_obs[i], 0] - pxy[j, 0], obs_xy[m_obs[i], 1] - pxy[j, 1])
-                break
-    return d
-
-
-@njit(cache=True, nogil=True)
 def pair_offsets(obs_xy: np.ndarray, m_obs: np.ndarray, m_cat: np.ndarray, rows: np.ndarray, pxy: np.ndarray,
                  inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`pair_distances` over ``rows`` predicted inside the image or just past its edge
-    (``inside`` says which), and whether each pair's catalogue star is one past the edge."""
+    """Distance (px) of each pair's observed star from its catalogue star's predicted position
+    (``rows``, predicted inside the image or just past its edge, ``inside`` says which, and their
+    pixels ``pxy``; NaN for a catalogue star not among ``rows``), and whether that catalogue star
+    is one past the edge."""
     d = np.full(len(m_obs), np.nan)
     outside = np.zeros(len(m_obs), np.bool_)
     for i in range(len(m_obs)):
@@ -212,7 +200,7 @@ def answer_kernel(obs_xy, flux, has_flux, m_obs, m_cat, r, star_vec, star_mag, c
     # would but are never named (match.EDGE_CROWDS)
     near_rows, near_pxy, near_in = field_stars_near(r_cam, chord, cell, n_side, keys, starts, stars, columns,
                                                     star_vec, cam, dist, CROWD * radius_px if EDGE_CROWDS else 0.0)
-    rows, pxy = near_rows[near_in], near_pxy[near_in]
+    rows = near_rows[near_in]
     moved = False
     # blends: the free observed stars against the unpaired catalogue stars of the field
     taken = np.zeros(len(obs_xy), np.bool_)

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .answer import compiled_checks, pair_distances, pair_offsets, repaired
+from .answer import compiled_checks, pair_offsets, repaired
 from .apparent import aberrate, apparent_directions
 from .attitude import ARCSEC_PER_RAD, estimate
 from .blends import dominant_pairs
@@ -55,27 +55,25 @@ FieldStars = list[tuple[np.ndarray, np.ndarray]]
 """Per camera: the catalogue rows predicted inside its image, and their pixel positions."""
 
 
-def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: FieldStars, radius_px: float,
-                       sigma_px: float = 0.0, near: FieldStars | None = None) -> np.ndarray:
+def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, near: FieldStars, radius_px: float,
+                       sigma_px: float = 0.0) -> np.ndarray:
     """Pairs whose observed star is far brighter than its catalogue star, whose catalogue star
     is fainter than the frame's completeness or past unseen stars (see
     :mod:`service.core.photometry`), that lie
-    too far from it for the frame's noise (:mod:`service.core.residuals`), or near a star the
-    member left out (:mod:`service.core.hidden`)."""
+    too far from it for the frame's noise (:mod:`service.core.residuals`; a star predicted just
+    past the image's edge, among ``near``'s, is held closer), or near a star the member left out
+    (:mod:`service.core.hidden`)."""
     pair_mag = np.asarray(db.stars.mag[v.cat], dtype=np.float64)
-    d = np.full(len(v.obs), np.nan)
-    for c, (rows, pxy) in enumerate(field):
+    d_near = np.full(len(v.obs), np.nan)
+    outside = np.zeros(len(v.obs), bool)
+    field_rows = []  # per camera, the catalogue rows predicted inside its image
+    for c, (rows, pxy) in enumerate(near):
+        inside = obs.cameras[c].contains(pxy)
+        field_rows.append(rows[inside])
         mine = np.flatnonzero(obs.camera[v.obs] == c)
         if len(mine) and len(rows):
-            d[mine] = pair_distances(obs.xy, v.obs[mine], v.cat[mine], rows, pxy)
-    d_near, outside = d, np.zeros(len(v.obs), bool)  # and the pairs whose star is just past the edge
-    if near is not None:
-        d_near = d.copy()
-        for c, (rows, pxy) in enumerate(near):
-            mine = np.flatnonzero((obs.camera[v.obs] == c) & np.isnan(d))
-            if len(mine) and len(rows):
-                d_near[mine], outside[mine] = pair_offsets(obs.xy, v.obs[mine], v.cat[mine], rows, pxy,
-                                                           obs.cameras[c].contains(pxy))
+            d_near[mine], outside[mine] = pair_offsets(obs.xy, v.obs[mine], v.cat[mine], rows, pxy, inside)
+    d = np.where(outside, np.nan, d_near)  # the pairs inside, as the checks below take them
     bad = distant_pairs(d_near, pair_mag, sigma_px, outside)
     hidden, limits = hidden_neighbours(db)
     for c, cam in enumerate(obs.cameras):
@@ -84,7 +82,7 @@ def _implausible_pairs(obs: Observation, db: NavDatabase, v: Verified, field: Fi
                                    CROWD * radius_px)
     if obs.flux is not None:
         bad |= too_bright(obs.flux[v.obs], pair_mag)
-    rows = np.unique(np.concatenate([r for r, _ in field])) if field else np.zeros(0, np.int64)
+    rows = np.unique(np.concatenate(field_rows)) if field_rows else np.zeros(0, np.int64)
     field_paired = _member(rows, v.cat)
     if len(pair_mag) >= 3 and pair_mag.max() > np.median(pair_mag) + FAINT_GATE_MAG:
         bad |= beyond_completeness(pair_mag, db.stars.mag[rows], field_paired)
@@ -154,12 +152,12 @@ def checked_pairs(obs: Observation, db: NavDatabase, v: Verified, radius_px: flo
     bright for their catalogue star, or fainter than the frame's completeness). Any number of
     cameras; :func:`service.core.answer.compiled_checks` is the same for one camera, compiled."""
     moved = False
-    field = stars_in_field(obs, db, v.matrix)
+    # the field's stars and those just past the image's edge (match.EDGE_CROWDS), once for both checks
     near = stars_in_field(obs, db, v.matrix, CROWD * radius_px if EDGE_CROWDS else 0.0)
     blended = _blend_pairs(obs, db, v, radius_px, near)
     if blended is not None:
         v, moved = blended, True
-    implausible = _implausible_pairs(obs, db, v, field, radius_px, sigma_px, near)  # also judges the blends just named
+    implausible = _implausible_pairs(obs, db, v, near, radius_px, sigma_px)  # also judges the blends just named
     if implausible.any():  # false detections paired with faint catalogue stars by position alone
         v = Verified(v.obs[~implausible], v.cat[~implausible], v.matrix, v.false_prob, v.n_trials)
         moved = True

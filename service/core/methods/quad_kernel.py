@@ -143,6 +143,20 @@ def _next_key(cur: np.ndarray, lo: np.ndarray, hi: np.ndarray, row: int, key: np
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _probe(key: np.int64, mask: np.uint64) -> tuple[np.uint64, np.int64]:
+    """A key's first table slot (its hash's low bits) and its finger (the hash's top
+    ``FINGER_BITS``, as :func:`~.quad_build.slot_word` stores them)."""
+    h = key_hash(key)
+    return h & mask, np.int64(h >> np.uint64(64 - FINGER_BITS))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _finger_of(word: np.int64) -> np.int64:
+    """The finger a table word holds (entry and pointer words alike)."""
+    return (word >> (6 * FINE_BITS)) & FINGER_MASK
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _first_edge_step(spill, first, end, step):
     """The first entry of ``spill[first:end]`` (sorted by the largest edge's fine step, the
     word's low bits) whose step is at least ``step``."""
@@ -204,7 +218,7 @@ def _prefetch_slots(table, mask, r_lo, r_hi, total, row, cur):
         cur[i] = r_lo[row, i]
     key = combine_key(cur)
     for _ in range(total):
-        slot = key_hash(key) & mask
+        slot, _ = _probe(key, mask)
         prefetch(table, np.int64(slot))
         prefetch(table, np.int64((slot + np.uint64(8)) & mask))  # the next line: a walk crosses into it
         key = _next_key(cur, r_lo, r_hi, row, key)
@@ -229,13 +243,11 @@ def _prefetch_lists(table, spill, mask, r_lo, r_hi, total, row, cur):
         cur[i] = r_lo[row, i]
     key = combine_key(cur)
     for _ in range(total):
-        h = key_hash(key)
-        finger = np.int64(h >> np.uint64(64 - FINGER_BITS))
-        sl = h & mask
+        sl, finger = _probe(key, mask)
         while table[sl] != 0:
             word = table[sl]
             sl = (sl + np.uint64(1)) & mask
-            if word < 0 and (word >> (6 * FINE_BITS)) & FINGER_MASK == finger:
+            if word < 0 and _finger_of(word) == finger:
                 first = (word >> 32) & SPILL_OFFSET_MASK
                 n = word & SPILL_COUNT_MASK
                 prefetch(spill, np.int64(first))
@@ -377,13 +389,11 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
                 f_hi[i] = hi_fine[i] if lo[i] == hi[i] else FINE_STEPS - 1
             key = combine_key(cur)
             for _ in range(total):
-                h = key_hash(key)
-                finger = np.int64(h >> np.uint64(64 - FINGER_BITS))
-                sl = h & mask
+                sl, finger = _probe(key, mask)
                 while table[sl] != 0:
                     word = table[sl]
                     sl = (sl + np.uint64(1)) & mask
-                    if (word >> (6 * FINE_BITS)) & FINGER_MASK != finger:
+                    if _finger_of(word) != finger:
                         continue
                     first, end = 0, 1
                     if word < 0:  # a key's entries in the spill list (quad_build.SPILL_OVER), by edge step

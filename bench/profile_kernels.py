@@ -1,7 +1,7 @@
 """Where the compiled kernels' time goes, function by function: perf samples, named.
 
     python -m bench.profile_kernels [--camera seed001] [--noise 0.5] [--false 0] [--random 0]
-        [--seconds 6] [--top 30] [--callers] [--refused]
+        [--seconds 6] [--top 30] [--callers] [--refused] [--stars N]
 
 Solves simulated frames of one paper camera with ``auto`` on the default database in a loop
 while ``perf record`` (Debian's linux-perf; software clock, no hardware counters needed)
@@ -16,7 +16,8 @@ the functions' own objects (weak symbols), so each kernel and helper is named wh
 (the return address on top of the stack that ``perf record --call-graph dwarf`` copies:
 numba's code keeps no frame pointers, so perf's own call graphs stop there).
 ``--random N`` solves ``N`` random-point frames instead (the refusal path); ``--refused`` keeps
-only the simulated frames that end with no solution (seed 002's sparse frames with false stars).
+only the simulated frames that end with no solution (seed 002's sparse frames with false stars);
+``--stars N`` only those of ``N`` centroids.
 """
 
 from __future__ import annotations
@@ -195,6 +196,14 @@ def refused_only(frames: list, solved: list[bool]) -> list:
     return kept
 
 
+def of_stars(frames: list, n: int) -> list:
+    """The frames of exactly ``n`` centroids, in order (``--stars``)."""
+    kept = [c for c in frames if len(c) == n]
+    if not kept:
+        raise SystemExit(f"no frame of {n} centroids")
+    return kept
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--camera", default="seed001")
@@ -206,6 +215,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--top", type=int, default=30)
     ap.add_argument("--callers", action="store_true", help="name the callers of the reference counting")
     ap.add_argument("--refused", action="store_true", help="only the frames that end with no solution")
+    ap.add_argument("--stars", type=int, default=0, help="only the frames of this many centroids (0: all)")
     args = ap.parse_args(argv)
     if shutil.which("perf") is None:
         raise SystemExit("perf not found (Debian: apt install linux-perf)")
@@ -219,6 +229,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     # reaches is loaded (and its object code kept)
     if args.refused:
         frames = refused_only(frames, ends)
+    if args.stars:
+        frames = of_stars(frames, args.stars)
     print(f"{len(frames)} frames; {write_perf_map()} functions named", flush=True)
     out = Path(tempfile.mkdtemp()) / "perf.data"
     graph = ["--call-graph", "dwarf,64"] if args.callers else []

@@ -214,3 +214,14 @@ def test_profile_kernels_refused_keeps_the_frames_that_end_unsolved(default_set_
     assert [id(c) for c in kept] == [id(c) for c, ok in zip(frames, solved) if not ok]
     with pytest.raises(SystemExit):
         refused_only(frames[:1], [True])
+
+
+def test_profile_kernels_stars_keeps_the_frames_of_that_many_centroids() -> None:
+    """``--stars N``: exactly the frames of ``N`` centroids, in order; none at all is an error."""
+    from bench.profile_kernels import of_stars
+
+    frames = [np.zeros((n, 3)) for n in (5, 6, 7, 6, 3)]
+    kept = of_stars(frames, 6)
+    assert [id(c) for c in kept] == [id(frames[1]), id(frames[3])]
+    with pytest.raises(SystemExit):
+        of_stars(frames, 4)

@@ -89,14 +89,13 @@ def has_star_within(px: float, py: float, pz: float, chord: float, cell: float, 
 
 
 @njit(cache=True, nogil=True, inline="always")
-def has_star_within_away(px: float, py: float, pz: float, chord: float, cell: float, n_side: int,
-                         keys: np.ndarray, starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
-                         columns: np.ndarray, skip0: int, skip1: int, skip2: int, away: np.ndarray,
-                         away_chord: float) -> bool:
-    """:func:`has_star_within`, counting only stars farther than ``away_chord`` from every
-    point of ``away`` ``(M, 3)``."""
-    return _star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, vec, columns, skip0, skip1, skip2,
-                        away, away_chord)
+def ball_cells(px: float, py: float, pz: float, chord: float, cell: float, n_side: int
+               ) -> tuple[int, int, int, int, int, int]:
+    """The grid's cell ranges ``(lo_x, hi_x, lo_y, hi_y, lo_z, hi_z)``, inclusive, that the ball
+    of radius ``chord`` about ``(px, py, pz)`` overlaps."""
+    return (max(int(math.floor((px - chord + 1.0) / cell)), 0), min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1),
+            max(int(math.floor((py - chord + 1.0) / cell)), 0), min(int(math.floor((py + chord + 1.0) / cell)), n_side - 1),
+            max(int(math.floor((pz - chord + 1.0) / cell)), 0), min(int(math.floor((pz + chord + 1.0) / cell)), n_side - 1))
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -104,12 +103,7 @@ def _star_within(px: float, py: float, pz: float, chord: float, cell: float, n_s
                  starts: np.ndarray, stars: np.ndarray, vec: np.ndarray, columns: np.ndarray, skip0: int,
                  skip1: int, skip2: int, away: np.ndarray, away_chord: float) -> bool:
     """The scan of both: every cell the query ball overlaps, the first star that qualifies."""
-    lo_x = max(int(math.floor((px - chord + 1.0) / cell)), 0)
-    hi_x = min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1)
-    lo_y = max(int(math.floor((py - chord + 1.0) / cell)), 0)
-    hi_y = min(int(math.floor((py + chord + 1.0) / cell)), n_side - 1)
-    lo_z = max(int(math.floor((pz - chord + 1.0) / cell)), 0)
-    hi_z = min(int(math.floor((pz + chord + 1.0) / cell)), n_side - 1)
+    lo_x, hi_x, lo_y, hi_y, lo_z, hi_z = ball_cells(px, py, pz, chord, cell, n_side)
     r2 = chord * chord
     a2 = away_chord * away_chord
     for ix in range(lo_x, hi_x + 1):

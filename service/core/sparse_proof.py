@@ -26,7 +26,7 @@ from .match import _camera_rows
 from .navdb.reader import NavDatabase
 from .prefetch import prefetch
 from .screen import frame_columns
-from .skygrid import collect_within, has_star_within_away, star_qualifies
+from .skygrid import ball_cells, collect_within
 from .skymask import may_hold_star
 from .sparse_others import K_UP_EMPTY, SPARSE_CONFIDENCE, prove_with_others
 from .star_index import field_grid, sky_grid, sky_mask, star_neighbours, star_vec64
@@ -342,12 +342,43 @@ def _box_kernel(tri_vec: np.ndarray, points: np.ndarray, away: np.ndarray, cands
             px, py, pz = icrs[j, 0], icrs[j, 1], icrs[j, 2]
             if mask_n > 0 and not may_hold_star(px, py, pz, mask_n, mask_words):
                 continue
-            if len(neighbours) and _neighbour_qualifies(px, py, pz, r2, a2, icrs[n_p:], neighbours, star_vec, c0, c1,
-                                                        c2):
-                out[k] += 1
-                continue
-            if has_star_within_away(px, py, pz, chord, cell, n_side, keys, starts, stars, star_vec, columns, c0, c1,
-                                    c2, icrs[n_p:], away_chord):
+            # The tests of skygrid.has_star_within_away and star_qualifies written out: inlined
+            # here, they took and gave back a reference count for each array they take at every
+            # point of every triple (~17% of a 3-star proof; `python -m bench.nrt_loops --kernel
+            # service.core.sparse_proof:_box_kernel`)
+            hit = False
+            for t in range(3 * n_nb):  # the triple's neighbours first
+                own = c0 if t < n_nb else (c1 if t < 2 * n_nb else c2)
+                row = neighbours[own, t % n_nb]
+                if row < 0 or row == c0 or row == c1 or row == c2:
+                    continue
+                sx, sy, sz = star_vec[row, 0], star_vec[row, 1], star_vec[row, 2]
+                if _d2(sx, sy, sz, px, py, pz) <= r2 and _clear_of(sx, sy, sz, icrs, n_p, a2):
+                    hit = True
+                    break
+            if not hit:  # the grid's cells the ball overlaps
+                lo_x, hi_x, lo_y, hi_y, lo_z, hi_z = ball_cells(px, py, pz, chord, cell, n_side)
+                for q in range((hi_x - lo_x + 1) * (hi_y - lo_y + 1)):
+                    col = (lo_x + q // (hi_y - lo_y + 1)) * n_side + lo_y + q % (hi_y - lo_y + 1)
+                    for pos in range(columns[col], columns[col + 1]):
+                        iz = keys[pos] - col * n_side
+                        if iz < lo_z:
+                            continue
+                        if iz > hi_z:
+                            break
+                        for st in range(starts[pos], starts[pos + 1]):
+                            row = stars[st]
+                            if row == c0 or row == c1 or row == c2:
+                                continue
+                            sx, sy, sz = star_vec[row, 0], star_vec[row, 1], star_vec[row, 2]
+                            if _d2(sx, sy, sz, px, py, pz) <= r2 and _clear_of(sx, sy, sz, icrs, n_p, a2):
+                                hit = True
+                                break
+                        if hit:
+                            break
+                    if hit:
+                        break
+            if hit:
                 out[k] += 1
     return out
 
@@ -356,6 +387,24 @@ _AHEAD = 4
 """:func:`_box_kernel` requests the stars (and their neighbour rows) of the triple this many ahead,
 and the neighbours' own vectors of the triple this many ahead again: the triples' stars lie all
 over the sky, so each triple's reads are cache misses that would otherwise follow one another."""
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _d2(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> float:
+    """Squared distance of two points (unit-vector chords squared)."""
+    return (ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _clear_of(sx: float, sy: float, sz: float, pts: np.ndarray, first: int, a2: float) -> bool:
+    """Is ``(sx, sy, sz)`` farther than ``sqrt(a2)`` from every row of ``pts`` from ``first`` on?
+    (One exit, no view: inlined in a loop, it then costs no reference count.)"""
+    clear = True
+    for m in range(first, len(pts)):
+        if _d2(sx, sy, sz, pts[m, 0], pts[m, 1], pts[m, 2]) <= a2:
+            clear = False
+            break
+    return clear
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -375,23 +424,6 @@ def _request_triple(cands: np.ndarray, k: int, n_k: int, vec_flat: np.ndarray, n
             row = neighbours[own, 0]
             if row >= 0:
                 prefetch(vec_flat, np.int64(3 * row))
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _neighbour_qualifies(px: float, py: float, pz: float, r2: float, a2: float, away: np.ndarray,
-                         neighbours: np.ndarray, star_vec: np.ndarray, c0: int, c1: int, c2: int) -> bool:
-    """Does a neighbour of star ``c0``, ``c1`` or ``c2`` (not one of them) lie within ``sqrt(r2)``
-    of ``(px, py, pz)`` and farther than ``sqrt(a2)`` from every row of ``away``? Each star is
-    tested by :func:`~.skygrid.has_star_within_away`'s own test (:func:`~.skygrid.star_qualifies`),
-    so a True here is a True there."""
-    for t in range(3):
-        own = c0 if t == 0 else (c1 if t == 1 else c2)
-        for i in range(neighbours.shape[1]):
-            row = neighbours[own, i]
-            if row >= 0 and row != c0 and row != c1 and row != c2 and star_qualifies(star_vec, row, px, py, pz, r2,
-                                                                                    away, a2):
-                return True
-    return False
 
 
 def _star_in_view(verifier: Verifier, cands: IntArray, obs_idx: IntArray) -> IntArray:

@@ -92,7 +92,9 @@ def has_star_within(px: float, py: float, pz: float, chord: float, cell: float, 
 def ball_cells(px: float, py: float, pz: float, chord: float, cell: float, n_side: int
                ) -> tuple[int, int, int, int, int, int]:
     """The grid's cell ranges ``(lo_x, hi_x, lo_y, hi_y, lo_z, hi_z)``, inclusive, that the ball
-    of radius ``chord`` about ``(px, py, pz)`` overlaps."""
+    of radius ``chord`` about ``(px, py, pz)`` overlaps. (:func:`_star_within`, on every proven
+    frame's path, spells them out: through this tuple seed 000's proven frames took 6-8% longer,
+    session 42.)"""
     return (max(int(math.floor((px - chord + 1.0) / cell)), 0), min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1),
             max(int(math.floor((py - chord + 1.0) / cell)), 0), min(int(math.floor((py + chord + 1.0) / cell)), n_side - 1),
             max(int(math.floor((pz - chord + 1.0) / cell)), 0), min(int(math.floor((pz + chord + 1.0) / cell)), n_side - 1))
@@ -103,7 +105,12 @@ def _star_within(px: float, py: float, pz: float, chord: float, cell: float, n_s
                  starts: np.ndarray, stars: np.ndarray, vec: np.ndarray, columns: np.ndarray, skip0: int,
                  skip1: int, skip2: int, away: np.ndarray, away_chord: float) -> bool:
     """The scan of both: every cell the query ball overlaps, the first star that qualifies."""
-    lo_x, hi_x, lo_y, hi_y, lo_z, hi_z = ball_cells(px, py, pz, chord, cell, n_side)
+    lo_x = max(int(math.floor((px - chord + 1.0) / cell)), 0)
+    hi_x = min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1)
+    lo_y = max(int(math.floor((py - chord + 1.0) / cell)), 0)
+    hi_y = min(int(math.floor((py + chord + 1.0) / cell)), n_side - 1)
+    lo_z = max(int(math.floor((pz - chord + 1.0) / cell)), 0)
+    hi_z = min(int(math.floor((pz + chord + 1.0) / cell)), n_side - 1)
     r2 = chord * chord
     a2 = away_chord * away_chord
     for ix in range(lo_x, hi_x + 1):

@@ -265,3 +265,48 @@ def test_the_box_without_the_match_is_the_masks() -> None:
         np.testing.assert_array_equal(_without_triple(box, a, b, c), box[mask])
     assert len(_without_triple(box, 9, 9, 9)) == len(box)
     assert len(_without_triple(box[:0].copy(), 1, 2, 3)) == 0
+
+
+@pytest.mark.parametrize("n_away", [0, 3])
+def test_box_kernel_counts_what_a_brute_force_count_finds(seed000_db: NavDatabase, n_away: int) -> None:
+    """``_box_kernel``'s scan (written out in the kernel, session 42) against every star of the
+    catalogue: per triple, how many points (body) have a star other than the triple within the
+    chord, and farther than the away chord from every away point, under the triple's TRIAD
+    attitude (``_sparse_attitudes``: ICRS -> body). With and without the neighbour short cut."""
+    from service.core.sparse_proof import _box_kernel, _sparse_attitudes
+    from service.core.star_index import field_grid, star_neighbours, star_vec64
+
+    rng = np.random.default_rng(42)
+    stars = star_vec64(seed000_db)
+    nb = star_neighbours(seed000_db)
+    no_nb = np.zeros((0, 1), np.int32)
+    fg = field_grid(seed000_db, 2.0, any_star=True)
+    tri_vec = rng.normal(size=(3, 3))
+    tri_vec /= np.linalg.norm(tri_vec, axis=1, keepdims=True)
+    points = rng.normal(size=(4, 3))
+    points /= np.linalg.norm(points, axis=1, keepdims=True)
+    away = points[:n_away] + rng.normal(scale=0.02, size=(n_away, 3))  # ~1.5 deg off: some stars near both
+    away /= np.linalg.norm(away, axis=1, keepdims=True) if n_away else 1.0
+    box = rng.integers(0, len(stars), (200, 3))
+    box = box[[len(set(t)) == 3 for t in box.tolist()]].astype(np.int64)
+    chord, away_chord = 2 * math.sin(math.radians(2.0) / 2), 2 * math.sin(math.radians(1.0) / 2)
+    args = (tri_vec, points, np.ascontiguousarray(away.reshape(-1, 3)), box, chord, away_chord, fg.cell,
+            fg.n_side, fg.keys, fg.starts, fg.stars, fg.vec, fg.columns, 0, np.zeros(1, np.uint64))
+    rs = _sparse_attitudes(tri_vec, stars, box)
+    want = np.zeros(len(box), np.int64)
+    unaway = np.zeros(len(box), np.int64)  # the same count without the away test
+    for k, r in enumerate(rs):
+        p_icrs, a_icrs = points @ r, away.reshape(-1, 3) @ r  # body -> ICRS: r^T v
+        ok = np.ones(len(stars), bool)
+        ok[box[k]] = False
+        if n_away:
+            ok &= (np.linalg.norm(stars[:, None] - a_icrs[None], axis=2) > away_chord).all(axis=1)
+        near = np.linalg.norm(stars[None] - p_icrs[:, None], axis=2) <= chord
+        want[k] = int((near & ok[None]).any(axis=1).sum())
+        ok[:] = True
+        ok[box[k]] = False
+        unaway[k] = int((near & ok[None]).any(axis=1).sum())
+    assert want.sum() > 0 and (want < len(points)).any()
+    assert (want < unaway).any() == bool(n_away)  # the away test decides some points
+    np.testing.assert_array_equal(_box_kernel(*args, no_nb), want)
+    np.testing.assert_array_equal(_box_kernel(*args, nb), want)

@@ -130,15 +130,15 @@ linear in the bins): a box's keys are stepped through, not recombined at each pr
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _next_key(cur: np.ndarray, lo: np.ndarray, hi: np.ndarray, row: int, key: np.int64) -> np.int64:
-    """Advance the bin combination ``cur`` (6,) over ``lo[row]..hi[row]`` (first coordinate
-    fastest) and return the key of the new one, from ``key``, the old one's."""
+def _next_key(cur: np.ndarray, bins: np.ndarray, row: int, key: np.int64) -> np.int64:
+    """Advance the bin combination ``cur`` (6,) over ``bins[row, :6]..bins[row, 6:]`` (first
+    coordinate fastest) and return the key of the new one, from ``key``, the old one's."""
     for i in range(6):
-        if cur[i] < hi[row, i]:
+        if cur[i] < bins[row, 6 + i]:
             cur[i] += 1
             return key + KEY_STRIDES[i]
-        key -= (cur[i] - lo[row, i]) * KEY_STRIDES[i]
-        cur[i] = lo[row, i]
+        key -= (cur[i] - bins[row, i]) * KEY_STRIDES[i]
+        cur[i] = bins[row, i]
     return key
 
 
@@ -172,75 +172,75 @@ def _first_edge_step(spill, first, end, step):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, row):
-    """Pattern ``COMBOS[k]``'s sorted edges (radians, from the observed stars' ``angles``), key
-    coordinates ``x`` +- ``t`` and bins ``lo..hi``, into ``row`` of ``r_*``; returns the probes
-    it needs, or -1 if its size is outside the table's. (Rows indexed, no row view, and one
-    return: where it is inlined, a view or a second exit kept numba's reference counts of its
-    arrays, taken and given back every pattern.)"""
+def _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_f, r_b, row):
+    """Pattern ``COMBOS[k]``'s sorted edges ``e`` (radians, from the observed stars' ``angles``),
+    key coordinates ``x`` +- ``t`` and bins ``lo..hi``, into ``row`` of the rings ``r_f`` (``e``,
+    ``x``, ``t``: columns 0-5, 6-11, 12-17) and ``r_b`` (``lo``, ``hi``: 0-5, 6-11); returns the
+    probes it needs, or -1 if its size is outside the table's. (Rows indexed, no row view, one
+    return, two arrays: where it is inlined, a view or a second exit kept numba's reference
+    counts of its arrays, taken and given back every pattern, and each array left a pair.)"""
     n = 0
     for i in range(4):
         for j in range(i + 1, 4):
             v = angles[COMBOS[k, i], COMBOS[k, j]]
             m = n
-            while m > 0 and r_e[row, m - 1] > v:  # insertion: the six angles ascending, as sorted_edges
-                r_e[row, m] = r_e[row, m - 1]
+            while m > 0 and r_f[row, m - 1] > v:  # insertion: the six angles ascending, as sorted_edges
+                r_f[row, m] = r_f[row, m - 1]
                 m -= 1
-            r_e[row, m] = v
+            r_f[row, m] = v
             n += 1
-    big = r_e[row, 5]
+    big = r_f[row, 5]
     total = -1
     if big <= edge_max + tol and big > 4 * tol:
         total = 1
         for i in range(6):
             if i < 5:
-                x = r_e[row, i] / big / ratio_bin
-                t = tol * (1.0 + r_e[row, i] / big) / big / ratio_bin
+                x = r_f[row, i] / big / ratio_bin
+                t = tol * (1.0 + r_f[row, i] / big) / big / ratio_bin
             else:
                 x = big / edge_bin
                 t = tol / edge_bin
-            r_x[row, i], r_t[row, i] = x, t
-            r_lo[row, i] = max(int(x - t), 0)
-            r_hi[row, i] = int(x + t)
+            r_f[row, 6 + i], r_f[row, 12 + i] = x, t
+            r_b[row, i] = max(int(x - t), 0)
+            r_b[row, 6 + i] = int(x + t)
             if i < 5:
-                r_hi[row, i] = min(r_hi[row, i], N_RATIO_BINS - 1)
-            total *= r_hi[row, i] - r_lo[row, i] + 1
+                r_b[row, 6 + i] = min(r_b[row, 6 + i], N_RATIO_BINS - 1)
+            total *= r_b[row, 6 + i] - r_b[row, i] + 1
     return total
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _prefetch_slots(table, mask, r_lo, r_hi, total, row, cur):
+def _prefetch_slots(table, mask, r_b, total, row, cur):
     """Request the first table words of each of the ``total`` probes of box ``row``: the slot's
     cache line and the next one (a probe walks its key's cluster until an empty slot, 3-12 words
     on the default set's tables; with the next line requested too, the quad pass on seed 000's
     random points took 7-10% less in sequence)."""
     for i in range(6):
-        cur[i] = r_lo[row, i]
+        cur[i] = r_b[row, i]
     key = combine_key(cur)
     for _ in range(total):
         slot, _ = _probe(key, mask)
         prefetch(table, np.int64(slot))
         prefetch(table, np.int64((slot + np.uint64(8)) & mask))  # the next line: a walk crosses into it
-        key = _next_key(cur, r_lo, r_hi, row, key)
+        key = _next_key(cur, r_b, row, key)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _look_ahead(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, r_total, table, mask,
-                cur):
+def _look_ahead(angles, k, tol, ratio_bin, edge_bin, edge_max, r_f, r_b, r_total, table, mask, cur):
     """Box pattern ``k`` into its ring row and request its slots if it is a cheap one."""
     row = k % (LOOK_AHEAD + 1)
-    total = _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, row)
+    total = _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_f, r_b, row)
     r_total[row] = total
     if 0 <= total <= PATTERN_PROBE_CAP:
-        _prefetch_slots(table, mask, r_lo, r_hi, total, row, cur)
+        _prefetch_slots(table, mask, r_b, total, row, cur)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _prefetch_lists(table, spill, mask, r_lo, r_hi, total, row, cur):
+def _prefetch_lists(table, spill, mask, r_b, total, row, cur):
     """Walk box ``row``'s probes (its table words requested a pattern ago) and request the first,
     middle and last lines of each spill list they point at (:func:`_first_edge_step` bisects it)."""
     for i in range(6):
-        cur[i] = r_lo[row, i]
+        cur[i] = r_b[row, i]
     key = combine_key(cur)
     for _ in range(total):
         sl, finger = _probe(key, mask)
@@ -255,7 +255,7 @@ def _prefetch_lists(table, spill, mask, r_lo, r_hi, total, row, cur):
                     prefetch(spill, np.int64(first + n // 2))
                 if n > 16:
                     prefetch(spill, np.int64(first + n - 1))
-        key = _next_key(cur, r_lo, r_hi, row, key)
+        key = _next_key(cur, r_b, row, key)
 
 
 @njit(cache=True, nogil=True)
@@ -321,11 +321,8 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
     deferred = 0
     n_comb = COMBO_COUNT[min(n_use, MAX_QUERY_STARS)]
     long_lists = len(spill) > LONG_LISTS * len(table)
-    r_e = np.empty((LOOK_AHEAD + 1, 6))  # the boxes of the pattern looked up and the next LOOK_AHEAD
-    r_x = np.empty((LOOK_AHEAD + 1, 6))
-    r_t = np.empty((LOOK_AHEAD + 1, 6))
-    r_lo = np.empty((LOOK_AHEAD + 1, 6), np.int64)
-    r_hi = np.empty((LOOK_AHEAD + 1, 6), np.int64)
+    r_f = np.empty((LOOK_AHEAD + 1, 18))  # the boxes of the pattern looked up and the next LOOK_AHEAD:
+    r_b = np.empty((LOOK_AHEAD + 1, 12), np.int64)  # e, x, t and lo, hi (see _pattern_box)
     r_total = np.empty(LOOK_AHEAD + 1, np.int64)
     n_ang = min(n_use, MAX_QUERY_STARS)
     angles = np.empty((n_ang, n_ang))  # between the brightest stars, each computed once
@@ -337,8 +334,8 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
             break
         if phase == 0:  # the look-ahead: see _look_ahead
             for k in range(min(LOOK_AHEAD, n_comb)):
-                _look_ahead(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, r_total,
-                            table, mask, cur)
+                _look_ahead(angles, k, tol, ratio_bin, edge_bin, edge_max, r_f, r_b, r_total, table, mask,
+                            cur)
         for k in range(n_comb):
             if first_marg >= 0 and n_pat - first_marg >= confirm_patterns:
                 return (STATUS_MARGINAL, o, c, empty, empty, np.eye(3), 1.0, trials, n_pat, False,
@@ -354,15 +351,15 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
                 if k + LOOK_AHEAD < n_comb:  # _look_ahead, written out: an inlined call here took and
                     # gave back a reference count for each of its ten arrays, every pattern
                     ahead = (k + LOOK_AHEAD) % (LOOK_AHEAD + 1)
-                    n_ahead = _pattern_box(angles, k + LOOK_AHEAD, tol, ratio_bin, edge_bin, edge_max, r_e, r_x,
-                                           r_t, r_lo, r_hi, ahead)
+                    n_ahead = _pattern_box(angles, k + LOOK_AHEAD, tol, ratio_bin, edge_bin, edge_max, r_f,
+                                           r_b, ahead)
                     r_total[ahead] = n_ahead
                     if 0 <= n_ahead <= PATTERN_PROBE_CAP:
-                        _prefetch_slots(table, mask, r_lo, r_hi, n_ahead, ahead, cur)
+                        _prefetch_slots(table, mask, r_b, n_ahead, ahead, cur)
                 if long_lists and k + 1 < n_comb:  # the next pattern's lists (LONG_LISTS)
                     nxt = (k + 1) % (LOOK_AHEAD + 1)
                     if 0 <= r_total[nxt] <= PATTERN_PROBE_CAP:
-                        _prefetch_lists(table, spill, mask, r_lo, r_hi, r_total[nxt], nxt, cur)
+                        _prefetch_lists(table, spill, mask, r_b, r_total[nxt], nxt, cur)
                 total = r_total[row]
                 if total < 0:
                     n_pat += 1  # counted once, never looked up
@@ -371,15 +368,16 @@ def quad_search(obs_vec, obs_xy, n_use, tol, patterns, table, spill, ratio_bin, 
                     deferred += 1
                     continue  # costly patterns after every cheap one (PATTERN_PROBE_CAP)
             else:
-                total = _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_e, r_x, r_t, r_lo, r_hi, row)
+                total = _pattern_box(angles, k, tol, ratio_bin, edge_bin, edge_max, r_f, r_b, row)
                 if total <= PATTERN_PROBE_CAP:
                     continue  # a cheap pattern, looked up in phase 0 (or outside the table's sizes)
                 r_total[row] = total
-                _prefetch_slots(table, mask, r_lo, r_hi, total, row, cur)
+                _prefetch_slots(table, mask, r_b, total, row, cur)
             n_pat += 1
             probes += total
             for i in range(6):
-                e[i], x[i], t[i], lo[i], hi[i] = r_e[row, i], r_x[row, i], r_t[row, i], r_lo[row, i], r_hi[row, i]
+                e[i], x[i], t[i] = r_f[row, i], r_f[row, 6 + i], r_f[row, 12 + i]
+                lo[i], hi[i] = r_b[row, i], r_b[row, 6 + i]
             for i in range(6):  # where the query's range lies inside its first and last bin
                 lo_fine[i] = max(int((x[i] - t[i] - lo[i]) * FINE_STEPS), 0)
                 hi_fine[i] = min(int((x[i] + t[i] - hi[i]) * FINE_STEPS), FINE_STEPS - 1)

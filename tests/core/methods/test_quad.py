@@ -267,7 +267,7 @@ def test_a_boxs_keys_stepped_are_the_keys_of_its_bins() -> None:
         for _ in range(total):
             assert key == combine_key(cur)
             seen.append(tuple(cur))
-            key = _next_key(cur, lo, hi, 0, key)
+            key = _next_key(cur, np.hstack([lo, hi]), 0, key)
         assert len(set(seen)) == total
         assert all(lo[0, i] <= b[i] <= hi[0, i] for b in seen for i in range(6))
         assert seen[1:2] == [] or seen[1][0] == seen[0][0] + (hi[0, 0] > lo[0, 0])

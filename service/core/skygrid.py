@@ -75,36 +75,13 @@ def build_sky_grid(vec: FloatArray, cell_rad: float = DEFAULT_CELL_RAD) -> SkyGr
     return SkyGrid(float(cell_rad), n_side, keys.astype(np.int64), starts, order.astype(np.int64), vec, columns)
 
 
-_NO_POINTS = np.zeros((0, 3))
-
-
 @njit(cache=True, nogil=True, inline="always")
 def has_star_within(px: float, py: float, pz: float, chord: float, cell: float, n_side: int,
                     keys: np.ndarray, starts: np.ndarray, stars: np.ndarray, vec: np.ndarray,
                     columns: np.ndarray, skip0: int, skip1: int, skip2: int) -> bool:
     """True if some star other than rows ``skip0..2`` lies within ``chord`` (unit-vector
-    distance) of the point ``(px, py, pz)``."""
-    return _star_within(px, py, pz, chord, cell, n_side, keys, starts, stars, vec, columns, skip0, skip1, skip2,
-                        _NO_POINTS, 0.0)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def ball_cells(px: float, py: float, pz: float, chord: float, cell: float, n_side: int
-               ) -> tuple[int, int, int, int, int, int]:
-    """The grid's cell ranges ``(lo_x, hi_x, lo_y, hi_y, lo_z, hi_z)``, inclusive, that the ball
-    of radius ``chord`` about ``(px, py, pz)`` overlaps. (:func:`_star_within`, on every proven
-    frame's path, spells them out: through this tuple seed 000's proven frames took 6-8% longer,
-    session 42.)"""
-    return (max(int(math.floor((px - chord + 1.0) / cell)), 0), min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1),
-            max(int(math.floor((py - chord + 1.0) / cell)), 0), min(int(math.floor((py + chord + 1.0) / cell)), n_side - 1),
-            max(int(math.floor((pz - chord + 1.0) / cell)), 0), min(int(math.floor((pz + chord + 1.0) / cell)), n_side - 1))
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _star_within(px: float, py: float, pz: float, chord: float, cell: float, n_side: int, keys: np.ndarray,
-                 starts: np.ndarray, stars: np.ndarray, vec: np.ndarray, columns: np.ndarray, skip0: int,
-                 skip1: int, skip2: int, away: np.ndarray, away_chord: float) -> bool:
-    """The scan of both: every cell the query ball overlaps, the first star that qualifies."""
+    distance) of the point ``(px, py, pz)``: every cell the query ball overlaps, up to the first
+    such star."""
     lo_x = max(int(math.floor((px - chord + 1.0) / cell)), 0)
     hi_x = min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1)
     lo_y = max(int(math.floor((py - chord + 1.0) / cell)), 0)
@@ -112,7 +89,6 @@ def _star_within(px: float, py: float, pz: float, chord: float, cell: float, n_s
     lo_z = max(int(math.floor((pz - chord + 1.0) / cell)), 0)
     hi_z = min(int(math.floor((pz + chord + 1.0) / cell)), n_side - 1)
     r2 = chord * chord
-    a2 = away_chord * away_chord
     for ix in range(lo_x, hi_x + 1):
         for iy in range(lo_y, hi_y + 1):
             col = ix * n_side + iy
@@ -126,28 +102,24 @@ def _star_within(px: float, py: float, pz: float, chord: float, cell: float, n_s
                     row = stars[s]
                     if row == skip0 or row == skip1 or row == skip2:
                         continue
-                    if star_qualifies(vec, row, px, py, pz, r2, away, a2):
+                    dx = vec[row, 0] - px
+                    dy = vec[row, 1] - py
+                    dz = vec[row, 2] - pz
+                    if not dx * dx + dy * dy + dz * dz > r2:
                         return True
     return False
 
 
 @njit(cache=True, nogil=True, inline="always")
-def star_qualifies(vec: np.ndarray, row: int, px: float, py: float, pz: float, r2: float, away: np.ndarray,
-                   a2: float) -> bool:
-    """Is star ``row`` within ``sqrt(r2)`` of ``(px, py, pz)`` and farther than ``sqrt(a2)`` from
-    every point of ``away`` ``(M, 3)``? (The test of :func:`_star_within`'s scan, star by star.)"""
-    dx = vec[row, 0] - px
-    dy = vec[row, 1] - py
-    dz = vec[row, 2] - pz
-    if dx * dx + dy * dy + dz * dz > r2:
-        return False
-    for j in range(len(away)):
-        ex = vec[row, 0] - away[j, 0]
-        ey = vec[row, 1] - away[j, 1]
-        ez = vec[row, 2] - away[j, 2]
-        if ex * ex + ey * ey + ez * ez <= a2:
-            return False
-    return True
+def ball_cells(px: float, py: float, pz: float, chord: float, cell: float, n_side: int
+               ) -> tuple[int, int, int, int, int, int]:
+    """The grid's cell ranges ``(lo_x, hi_x, lo_y, hi_y, lo_z, hi_z)``, inclusive, that the ball
+    of radius ``chord`` about ``(px, py, pz)`` overlaps. (:func:`has_star_within`, on every proven
+    frame's path, spells them out: through this tuple seed 000's proven frames took 6-8% longer,
+    session 42.)"""
+    return (max(int(math.floor((px - chord + 1.0) / cell)), 0), min(int(math.floor((px + chord + 1.0) / cell)), n_side - 1),
+            max(int(math.floor((py - chord + 1.0) / cell)), 0), min(int(math.floor((py + chord + 1.0) / cell)), n_side - 1),
+            max(int(math.floor((pz - chord + 1.0) / cell)), 0), min(int(math.floor((pz + chord + 1.0) / cell)), n_side - 1))
 
 
 def stars_within(grid: SkyGrid, points: FloatArray, chord: float) -> np.ndarray:
